@@ -1,0 +1,118 @@
+"""The adjustment window: the one object through which causal knowledge enters training.
+
+:func:`~torchrl_causal.graphs.windowed_adjustment` computes it from a time-slice
+template; :class:`~torchrl_causal.transforms.CausalWindowTransform` applies it to
+TensorDicts. It is plain data (no torch), JSON-serialisable through :meth:`to_dict`, so
+that a saved policy reloads with exactly the encoding it was trained on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+Node = Hashable
+
+__all__ = ["AdjustmentWindow"]
+
+
+def _node_to_json(node: Node) -> Any:
+    return list(node) if isinstance(node, tuple) else node
+
+
+def _node_from_json(node: Any) -> Node:
+    return tuple(node) if isinstance(node, list) else node
+
+
+@dataclass(frozen=True)
+class AdjustmentWindow:
+    """Which observed variables, at which lags, the imitator may condition on.
+
+    Lags count steps back from the current step ``t`` (``0`` is the current step). State
+    variables carry lags ``0..k``; the action carries ``1..k`` (previous actions), as in
+    the paper's Algorithm 2 encoder.
+
+    Attributes:
+        k: window size (number of past steps the encoding reaches back).
+        action: name of the action variable.
+        lags: admissible variable -> ascending tuple of lags. Its iteration order (the
+            template's variable order, the action last) is the order in which
+            :class:`~torchrl_causal.transforms.CausalWindowTransform` concatenates
+            features: variable by variable, and within a variable by increasing lag.
+        excluded: observed variables left out of every adjustment set (e.g. the compass W).
+        exact: ``True`` when the per-step sets provably satisfy the sequential
+            pi-backdoor criterion (Definition 2); ``False`` for relaxed or non-causal
+            windows.
+        witnesses: paths (tuples of nodes ``(var, t)`` or ``"Y"`` in the horizon-(k+1)
+            proxy graph) that stay open under this window; empty when ``exact``.
+        observed: every variable the imitator observes, in template order.
+
+    Examples:
+        >>> w = AdjustmentWindow(k=2, action="X", lags={"P": (0, 1, 2), "X": (1, 2)},
+        ...                      excluded=frozenset({"W"}), exact=False,
+        ...                      observed=("P", "W", "X"))
+        >>> sorted(w.adjustment_set(1))
+        [('P', 0), ('P', 1), ('X', 0)]
+        >>> AdjustmentWindow.from_dict(w.to_dict()) == w
+        True
+    """
+
+    k: int
+    action: str
+    lags: Mapping[str, tuple[int, ...]]
+    excluded: frozenset[str] = frozenset()
+    exact: bool = False
+    witnesses: tuple[tuple[Node, ...], ...] = ()
+    observed: tuple[str, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.k, int) or self.k < 0:
+            raise ValueError(f"window size k must be a non-negative int, got {self.k!r}")
+        for var, var_lags in self.lags.items():
+            if list(var_lags) != sorted(set(var_lags)) or any(lag < 0 or lag > self.k for lag in var_lags):
+                raise ValueError(
+                    f"lags of {var!r} must be strictly increasing within 0..{self.k}, got {var_lags!r}"
+                )
+            if var == self.action and 0 in var_lags:
+                raise ValueError(f"the action {var!r} cannot be conditioned on at lag 0 (it is being chosen)")
+        object.__setattr__(self, "lags", {var: tuple(v) for var, v in self.lags.items()})
+        object.__setattr__(self, "excluded", frozenset(self.excluded))
+
+    @property
+    def variables(self) -> tuple[str, ...]:
+        """Admissible variables in encoding order."""
+        return tuple(self.lags)
+
+    def adjustment_set(self, t: int) -> frozenset[tuple[str, int]]:
+        """The set ``Z_t`` as nodes ``(var, tau)``, clipped at the episode start (tau >= 0)."""
+        if t < 0:
+            raise ValueError(f"timestep must be >= 0, got {t}")
+        return frozenset((var, t - lag) for var, var_lags in self.lags.items() for lag in var_lags if t - lag >= 0)
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable description; :meth:`from_dict` inverts it exactly."""
+        return {
+            "k": self.k,
+            "action": self.action,
+            "lags": {var: list(v) for var, v in self.lags.items()},
+            "excluded": sorted(self.excluded),
+            "exact": self.exact,
+            "witnesses": [[_node_to_json(n) for n in path] for path in self.witnesses],
+            "observed": list(self.observed),
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> AdjustmentWindow:
+        missing = {"k", "action", "lags"} - set(data)
+        if missing:
+            raise ValueError(f"adjustment window description lacks {sorted(missing)}")
+        return cls(
+            k=int(data["k"]),
+            action=str(data["action"]),
+            lags={str(var): tuple(int(x) for x in v) for var, v in data["lags"].items()},
+            excluded=frozenset(data.get("excluded", ())),
+            exact=bool(data.get("exact", False)),
+            witnesses=tuple(tuple(_node_from_json(n) for n in path) for path in data.get("witnesses", ())),
+            observed=tuple(data.get("observed", ())),
+        )
