@@ -1,0 +1,25 @@
+"""Confounded envs as TorchRL envs: the SCM base, Route Choice, RoverMaze, planners and experts.
+
+Every env exposes ``causal_template``, ``regime`` (``"train"`` | ``"deploy"``),
+``confounding_strength`` in ``[0, 1]`` and ``horizon``; observed variables are root keys,
+variables latent to the imitator live under ``("latent", name)`` and the confounder under
+``("scm", name)``.
+"""
+
+from torchrl_causal.envs.base import (
+    REGIMES,
+    CompassSensor,
+    ConfoundedEnv,
+    GustConfoundedEnv,
+    GustProcess,
+    rotate,
+)
+
+__all__ = [
+    "REGIMES",
+    "CompassSensor",
+    "ConfoundedEnv",
+    "GustConfoundedEnv",
+    "GustProcess",
+    "rotate",
+]

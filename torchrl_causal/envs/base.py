@@ -1,0 +1,402 @@
+"""The SCM layer shared by every confounded env: regimes, strength, horizon, gusts, compass.
+
+Every confounded env is a batched TorchRL :class:`~torchrl.envs.EnvBase` whose keys are the
+variables of its :class:`~torchrl_causal.graphs.TimeSliceTemplate`: observed variables are
+root keys, variables latent to the imitator live under ``("latent", name)``, the confounder
+under ``("scm", name)``. :class:`ConfoundedEnv` owns what every such env shares (argument
+validation, seeding, step counting, truncation at ``horizon``, the ``"success"`` flag, partial
+resets); subclasses implement three hooks (:meth:`~ConfoundedEnv._reset_state`,
+:meth:`~ConfoundedEnv._transition`, :meth:`~ConfoundedEnv._observation`).
+
+:class:`GustConfoundedEnv` adds the confounding mechanism of the maze suite (DESIGN.md):
+a piecewise-constant :class:`GustProcess` that pushes the body and enters the reward, and a
+:class:`CompassSensor` whose reading mixes the true signal with the gust direction and is
+rotated by ``confounding_strength * pi`` in the deployment regime. Both helpers are plain
+batched torch functions, so envs that simulate in numpy/MuJoCo can call them on tensors.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import abstractmethod
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from tensordict.utils import NestedKey
+from torchrl.data import Binary, Composite, TensorSpec, Unbounded
+from torchrl.envs import EnvBase
+
+if TYPE_CHECKING:
+    from torchrl_causal.graphs import TimeSliceTemplate
+
+__all__ = [
+    "REGIMES",
+    "CompassSensor",
+    "ConfoundedEnv",
+    "GustConfoundedEnv",
+    "GustProcess",
+    "rotate",
+]
+
+Regime = Literal["train", "deploy"]
+REGIMES: tuple[str, ...] = ("train", "deploy")
+
+
+def rotate(vectors: torch.Tensor, angle: float | torch.Tensor) -> torch.Tensor:
+    """Rotates 2-D vectors (last dim of size 2) counter-clockwise by ``angle`` radians.
+
+    Examples:
+        >>> rotate(torch.tensor([1.0, 0.0]), math.pi / 2).round(decimals=6)
+        tensor([0., 1.])
+    """
+    angle = torch.as_tensor(angle, dtype=vectors.dtype, device=vectors.device)
+    cos, sin = torch.cos(angle), torch.sin(angle)
+    x, y = vectors.unbind(-1)
+    return torch.stack((cos * x - sin * y, sin * x + cos * y), dim=-1)
+
+
+@dataclass(frozen=True)
+class GustProcess:
+    """The piecewise-constant gust process of the maze suite (the latent confounder U).
+
+    Every ``period`` steps (counted from the episode start, step 0 included) the gust is
+    redrawn: with probability ``probability`` a gust of magnitude ``U[low, high]`` blowing
+    in a uniform direction, else calm (a zero vector). Between redraws it stays constant,
+    which is what makes U a confounder shared by up to ``period`` consecutive time slices.
+
+    The gust is a force vector of shape ``batch + (2,)``.
+
+    Examples:
+        >>> process = GustProcess()
+        >>> g = torch.Generator().manual_seed(0)
+        >>> gust = process.draw((4096,), generator=g)
+        >>> gust.shape
+        torch.Size([4096, 2])
+        >>> magnitude = gust.norm(dim=-1)
+        >>> bool(((magnitude == 0) | ((magnitude >= 2) & (magnitude <= 5))).all())
+        True
+        >>> step = torch.tensor([[4], [5]])
+        >>> held = process.advance(torch.ones(2, 2), step, generator=g)
+        >>> held[0].tolist()  # step 4: not a redraw step, the gust persists
+        [1.0, 1.0]
+    """
+
+    period: int = 5
+    probability: float = 0.05
+    low: float = 2.0
+    high: float = 5.0
+
+    def __post_init__(self) -> None:
+        if self.period < 1:
+            raise ValueError(f"gust period must be >= 1, got {self.period}")
+        if not 0.0 <= self.probability <= 1.0:
+            raise ValueError(f"gust probability must lie in [0, 1], got {self.probability}")
+        if not 0.0 <= self.low <= self.high:
+            raise ValueError(f"gust magnitude range must satisfy 0 <= low <= high, got [{self.low}, {self.high}]")
+
+    def draw(
+        self,
+        shape: Sequence[int],
+        *,
+        generator: torch.Generator | None = None,
+        device: torch.device | str | None = None,
+        dtype: torch.dtype = torch.float32,
+    ) -> torch.Tensor:
+        """Draws fresh gusts of shape ``shape + (2,)`` (zero where calm)."""
+        uniforms = torch.rand((*shape, 3), generator=generator, device=device, dtype=dtype)
+        active, magnitude, angle = uniforms.unbind(-1)
+        magnitude = torch.where(
+            active < self.probability, self.low + (self.high - self.low) * magnitude, torch.zeros_like(magnitude)
+        )
+        angle = 2 * math.pi * angle
+        return torch.stack((magnitude * torch.cos(angle), magnitude * torch.sin(angle)), dim=-1)
+
+    def advance(
+        self, gust: torch.Tensor, step_count: torch.Tensor, *, generator: torch.Generator | None = None
+    ) -> torch.Tensor:
+        """The gust at step ``step_count`` given the gust of the previous step.
+
+        Args:
+            gust: the previous gust, shape ``batch + (2,)``.
+            step_count: the new step index, shape ``batch + (1,)``; entries at a multiple of
+                ``period`` are redrawn, the others keep ``gust``.
+        """
+        fresh = self.draw(gust.shape[:-1], generator=generator, device=gust.device, dtype=gust.dtype)
+        return torch.where(step_count % self.period == 0, fresh, gust)
+
+    @staticmethod
+    def direction(gust: torch.Tensor) -> torch.Tensor:
+        """Unit vector along each gust (the zero vector where calm)."""
+        magnitude = gust.norm(dim=-1, keepdim=True)
+        return torch.where(magnitude > 0, gust / magnitude.clamp_min(1e-12), torch.zeros_like(gust))
+
+    @staticmethod
+    def exposure(gust: torch.Tensor) -> torch.Tensor:
+        """Gust magnitude, shape ``batch + (1,)`` (what the reward penalises)."""
+        return gust.norm(dim=-1, keepdim=True)
+
+
+@dataclass(frozen=True)
+class CompassSensor:
+    """The imitator's extra sensor W: a collider of the true signal and the gust.
+
+    ``W = rotate(tanh(signal_weight * signal + gust_weight * gust_direction + noise), rotation)``
+    with ``noise ~ N(0, noise_std**2)`` per component. ``signal`` is the true unit signal
+    (the heading for a compass, the locomotion direction for a vibration sensor). The
+    rotation is ``confounding_strength * pi`` in the deployment regime and 0 in training.
+    The reading has no causal effect on anything: it is only ever written to the
+    observation.
+
+    Examples:
+        >>> sensor = CompassSensor(noise_std=0.0)
+        >>> east, calm = torch.tensor([[1.0, 0.0]]), torch.zeros(1, 2)
+        >>> w = sensor.read(east, calm, rotation=0.0)
+        >>> torch.allclose(w, torch.tanh(torch.tensor([[0.9, 0.0]])))
+        True
+        >>> torch.allclose(sensor.read(east, calm, rotation=math.pi), -w, atol=1e-6)
+        True
+    """
+
+    signal_weight: float = 0.9
+    gust_weight: float = 0.1
+    noise_std: float = 0.05
+
+    def read(
+        self,
+        signal: torch.Tensor,
+        gust: torch.Tensor,
+        *,
+        rotation: float | torch.Tensor,
+        generator: torch.Generator | None = None,
+    ) -> torch.Tensor:
+        """The sensor reading for a batch of ``signal`` (``batch + (2,)``) under ``gust``."""
+        noise = torch.randn(signal.shape, generator=generator, device=signal.device, dtype=signal.dtype)
+        raw = self.signal_weight * signal + self.gust_weight * GustProcess.direction(gust) + self.noise_std * noise
+        return rotate(torch.tanh(raw), rotation)
+
+
+def _validate_regime(regime: str) -> str:
+    if regime not in REGIMES:
+        raise ValueError(f"regime must be one of {REGIMES}, got {regime!r}")
+    return regime
+
+
+def _validate_strength(confounding_strength: float) -> float:
+    strength = float(confounding_strength)
+    if not 0.0 <= strength <= 1.0:
+        raise ValueError(f"confounding_strength must lie in [0, 1], got {confounding_strength!r}")
+    return strength
+
+
+def _validate_horizon(horizon: int) -> int:
+    if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
+        raise ValueError(f"horizon must be a positive int, got {horizon!r}")
+    return horizon
+
+
+class ConfoundedEnv(EnvBase):
+    """Base class of the SCM-driven envs: a batched TorchRL env over a causal template.
+
+    Subclasses implement:
+
+    * :attr:`causal_template`: the time-slice template that describes the mechanism;
+    * :meth:`_make_variable_specs`: the specs of ``"action"`` and of the variable keys;
+    * :meth:`_reset_state` (draw the initial state where a mask is set),
+      :meth:`_transition` (advance one step, return reward and success) and
+      :meth:`_observation` (the variable entries of the current state).
+
+    The base adds ``"success"`` (bool, ``batch + (1,)``), ``"done"``/``"terminated"``/
+    ``"truncated"`` (terminated = success, truncated = ``horizon`` steps reached without
+    success), handles partial resets (``"_reset"``) and seeds a private
+    :class:`torch.Generator` through :meth:`set_seed`, so that a seed reproduces a rollout.
+
+    Args:
+        batch_size: the env's batch shape (any shape, ``()`` included).
+        regime: ``"train"`` (demonstration collection) or ``"deploy"`` (evaluation).
+        confounding_strength: in ``[0, 1]``; how strongly the deployment regime shifts
+            the confounded mechanism (0 = no shift).
+        horizon: episodes are truncated after this many steps.
+        device: torch device of the env.
+        seed: seed of the env's generator (``None`` draws one from torch's global RNG).
+    """
+
+    def __init__(
+        self,
+        *,
+        batch_size: Sequence[int] | torch.Size | int = (),
+        regime: Regime = "train",
+        confounding_strength: float = 1.0,
+        horizon: int = 1000,
+        device: torch.device | str | None = None,
+        seed: int | None = None,
+    ) -> None:
+        if isinstance(batch_size, int):
+            batch_size = (batch_size,)
+        device = torch.device("cpu" if device is None else device)
+        super().__init__(device=device, batch_size=torch.Size(batch_size))
+        self._regime = _validate_regime(regime)
+        self._confounding_strength = _validate_strength(confounding_strength)
+        self._horizon = _validate_horizon(horizon)
+        self.rng = torch.Generator(device=device)
+        flag_shape = (*self.batch_size, 1)
+        self._step_count = torch.zeros(flag_shape, dtype=torch.int64, device=device)
+        self._success = torch.zeros(flag_shape, dtype=torch.bool, device=device)
+        self._make_specs()
+        self.set_seed(int(torch.randint(0, 2**62, ()).item()) if seed is None else seed)
+
+    # -- configuration -------------------------------------------------------------------
+
+    @property
+    def regime(self) -> str:
+        """``"train"`` or ``"deploy"``."""
+        return self._regime
+
+    @property
+    def confounding_strength(self) -> float:
+        """Shift strength in ``[0, 1]`` applied by the deployment regime."""
+        return self._confounding_strength
+
+    @property
+    def horizon(self) -> int:
+        """Number of steps after which an episode is truncated."""
+        return self._horizon
+
+    @property
+    @abstractmethod
+    def causal_template(self) -> TimeSliceTemplate:
+        """The time-slice template whose edges this env's mechanism makes true."""
+
+    def config(self) -> dict[str, object]:
+        """JSON-serialisable constructor arguments (recorded with demonstrations)."""
+        return {
+            "class": f"{type(self).__module__}.{type(self).__qualname__}",
+            "batch_size": list(self.batch_size),
+            "regime": self.regime,
+            "confounding_strength": self.confounding_strength,
+            "horizon": self.horizon,
+        }
+
+    # -- hooks for subclasses ------------------------------------------------------------
+
+    @abstractmethod
+    def _make_variable_specs(self) -> tuple[TensorSpec, Mapping[NestedKey, TensorSpec]]:
+        """Returns ``(action_spec, variable_specs)``; specs are sized to ``self.batch_size``."""
+
+    @abstractmethod
+    def _reset_state(self, mask: torch.Tensor) -> None:
+        """Draws a fresh initial state wherever ``mask`` (bool, ``batch + (1,)``) is set."""
+
+    @abstractmethod
+    def _transition(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Advances one step under ``action``; returns ``(reward, success)``, each ``batch + (1,)``."""
+
+    @abstractmethod
+    def _observation(self) -> dict[str, object]:
+        """The variable entries of the current state (nested dicts for nested keys)."""
+
+    def _reset_exogenous(self, mask: torch.Tensor) -> None:
+        """Resets exogenous processes (before :meth:`_reset_state`); none by default."""
+
+    def _advance_exogenous(self) -> None:
+        """Advances exogenous processes to the new step count; none by default."""
+
+    # -- EnvBase plumbing ----------------------------------------------------------------
+
+    def _make_specs(self) -> None:
+        action_spec, variable_specs = self._make_variable_specs()
+        observation_spec = Composite(shape=self.batch_size, device=self.device)
+        for key, spec in variable_specs.items():
+            observation_spec[key] = spec
+        observation_spec["success"] = Binary(n=1, shape=(*self.batch_size, 1), device=self.device, dtype=torch.bool)
+        self.observation_spec = observation_spec
+        self.action_spec = action_spec
+        self.reward_spec = Unbounded(shape=(*self.batch_size, 1), device=self.device)
+        flag = Binary(n=1, shape=(*self.batch_size, 1), device=self.device, dtype=torch.bool)
+        self.done_spec = Composite(
+            done=flag, terminated=flag.clone(), truncated=flag.clone(), shape=self.batch_size, device=self.device
+        )
+
+    def _set_seed(self, seed: int | None) -> None:
+        self.rng.manual_seed(int(seed) if seed is not None else int(torch.randint(0, 2**62, ()).item()))
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        mask = None if tensordict is None else tensordict.get("_reset", None)
+        if mask is None:
+            mask = torch.ones_like(self._success)
+        mask = mask.reshape(self._success.shape)
+        self._step_count = torch.where(mask, 0, self._step_count)
+        self._success = self._success & ~mask
+        self._reset_exogenous(mask)
+        self._reset_state(mask)
+        false = torch.zeros_like(self._success)
+        return TensorDict(
+            {**self._observation(), "success": self._success.clone(), "done": false, "terminated": false,
+             "truncated": false.clone()},
+            batch_size=self.batch_size,
+            device=self.device,
+        )
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        reward, success = self._transition(tensordict.get("action"))
+        self._step_count = self._step_count + 1
+        self._success = success
+        self._advance_exogenous()
+        truncated = (self._step_count >= self.horizon) & ~success
+        return TensorDict(
+            {**self._observation(), "reward": reward, "success": success, "done": success | truncated,
+             "terminated": success.clone(), "truncated": truncated},
+            batch_size=self.batch_size,
+            device=self.device,
+        )
+
+
+class GustConfoundedEnv(ConfoundedEnv):
+    """A :class:`ConfoundedEnv` confounded by the shared gust process and a compass.
+
+    Keeps the gust of the current step in :attr:`gust` (``batch + (2,)``), redrawn by
+    :attr:`gust_process` at every multiple of its period, and reads the sensor W with
+    :meth:`read_compass`. The gust is exposed under ``("scm", "U")``; subclasses add
+    ``scm_observation()`` to their :meth:`_observation` and use :meth:`gust_penalty` in
+    their reward.
+
+    Class attributes:
+        gust_process: the :class:`GustProcess` (period 5, p = 0.05, magnitude U[2, 5]).
+        compass: the :class:`CompassSensor` (0.9 signal + 0.1 gust direction + N(0, 0.05²)).
+        gust_penalty_weight: reward penalty per unit of gust magnitude per step.
+    """
+
+    gust_process: GustProcess = GustProcess()
+    compass: CompassSensor = CompassSensor()
+    gust_penalty_weight: float = 0.1
+
+    @property
+    def compass_rotation(self) -> float:
+        """Angle by which the sensor reading is rotated: ``strength * pi`` when deployed, else 0."""
+        return self.confounding_strength * math.pi if self.regime == "deploy" else 0.0
+
+    def _make_specs(self) -> None:
+        self.gust = torch.zeros((*self.batch_size, 2), device=self.device)
+        super()._make_specs()
+        self.observation_spec["scm", "U"] = Unbounded(shape=(*self.batch_size, 2), device=self.device)
+
+    def _reset_exogenous(self, mask: torch.Tensor) -> None:
+        fresh = self.gust_process.draw(self.batch_size, generator=self.rng, device=self.device)
+        self.gust = torch.where(mask, fresh, self.gust)
+
+    def _advance_exogenous(self) -> None:
+        self.gust = self.gust_process.advance(self.gust, self._step_count, generator=self.rng)
+
+    def read_compass(self, signal: torch.Tensor) -> torch.Tensor:
+        """W for the true unit ``signal`` under the current gust and regime."""
+        return self.compass.read(signal, self.gust, rotation=self.compass_rotation, generator=self.rng)
+
+    def gust_penalty(self) -> torch.Tensor:
+        """Reward penalty of the current gust, ``batch + (1,)``."""
+        return self.gust_penalty_weight * self.gust_process.exposure(self.gust)
+
+    def scm_observation(self) -> dict[str, dict[str, torch.Tensor]]:
+        """The ``("scm", "U")`` entry (diagnostics only: no agent may read it)."""
+        return {"scm": {"U": self.gust.clone()}}
