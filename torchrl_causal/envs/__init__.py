@@ -14,6 +14,7 @@ from torchrl_causal.envs.base import (
     GustProcess,
     rotate,
 )
+from torchrl_causal.envs.route_choice import RouteChoiceEnv, route_choice_value
 
 __all__ = [
     "REGIMES",
@@ -21,5 +22,7 @@ __all__ = [
     "ConfoundedEnv",
     "GustConfoundedEnv",
     "GustProcess",
+    "RouteChoiceEnv",
     "rotate",
+    "route_choice_value",
 ]

@@ -203,6 +203,7 @@ class ConfoundedEnv(EnvBase):
     Subclasses implement:
 
     * :attr:`causal_template`: the time-slice template that describes the mechanism;
+    * optionally :meth:`_terminated` (default: an episode ends for good on success);
     * :meth:`_make_variable_specs`: the specs of ``"action"`` and of the variable keys;
     * :meth:`_reset_state` (draw the initial state where a mask is set),
       :meth:`_transition` (advance one step, return reward and success) and
@@ -297,6 +298,10 @@ class ConfoundedEnv(EnvBase):
     def _observation(self) -> dict[str, object]:
         """The variable entries of the current state (nested dicts for nested keys)."""
 
+    def _terminated(self, success: torch.Tensor) -> torch.Tensor:
+        """Which episodes end for good this step; reaching success by default."""
+        return success.clone()
+
     def _reset_exogenous(self, mask: torch.Tensor) -> None:
         """Resets exogenous processes (before :meth:`_reset_state`); none by default."""
 
@@ -344,10 +349,11 @@ class ConfoundedEnv(EnvBase):
         self._step_count = self._step_count + 1
         self._success = success
         self._advance_exogenous()
-        truncated = (self._step_count >= self.horizon) & ~success
+        terminated = self._terminated(success)
+        truncated = (self._step_count >= self.horizon) & ~terminated
         return TensorDict(
-            {**self._observation(), "reward": reward, "success": success, "done": success | truncated,
-             "terminated": success.clone(), "truncated": truncated},
+            {**self._observation(), "reward": reward, "success": success, "done": terminated | truncated,
+             "terminated": terminated, "truncated": truncated},
             batch_size=self.batch_size,
             device=self.device,
         )
@@ -381,6 +387,10 @@ class GustConfoundedEnv(ConfoundedEnv):
         self.gust = torch.zeros((*self.batch_size, 2), device=self.device)
         super()._make_specs()
         self.observation_spec["scm", "U"] = Unbounded(shape=(*self.batch_size, 2), device=self.device)
+
+    def _terminated(self, success: torch.Tensor) -> torch.Tensor:
+        """Which episodes end for good this step; reaching success by default."""
+        return success.clone()
 
     def _reset_exogenous(self, mask: torch.Tensor) -> None:
         fresh = self.gust_process.draw(self.batch_size, generator=self.rng, device=self.device)
