@@ -1,0 +1,180 @@
+"""Report generation on a fixture of fake runs (no training).
+
+The fixture reproduces the paper's AntMaze-Medium raw results (Appendix F,
+tab:raw-results): the report must turn them into Table 1's normalised E[Y] and success
+rates with the paper's standard errors.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import pytest
+from omegaconf import OmegaConf
+
+from torchrl_causal.evaluation import (
+    CSV_COLUMNS,
+    TABLE1_ALGORITHMS,
+    EvaluationResult,
+    aggregate,
+    effect_checks,
+    load_runs,
+    normalised_returns,
+    write_report,
+)
+from torchrl_causal.evaluation.runs import eval_path
+from torchrl_causal.report import main as report_main
+
+# Appendix F, AntMaze-Medium column: raw E[Y] and success rate (%), deployment regime.
+PAPER_RAW = {
+    "expert": (-104.0, 87.6), "c_bc": (-125.2, 77.9), "c_gail": (-135.8, 74.1), "c_sqil": (-99.6, 90.7),
+    "c_iq_learn": (-118.2, 84.3), "bc": (-375.3, 0.0), "gail": (-364.9, 0.0), "sqil": (-370.7, 0.0),
+    "iq_learn": (-372.5, 0.0),
+}
+# Table 1, AntMaze-Medium: normalised E[Y] (the paper rounds the raw values first, so the
+# last digit can differ by 0.1) and success-rate standard errors (%).
+PAPER_NORMALISED = {
+    "expert": 271.4, "c_bc": 250.1, "c_gail": 239.5, "c_sqil": 275.8, "c_iq_learn": 257.1,
+    "bc": 0.0, "gail": 10.4, "sqil": 4.7, "iq_learn": 2.8,
+}
+PAPER_SUCCESS_SE = {"expert": 1.0, "c_bc": 1.3, "c_gail": 1.4, "c_sqil": 0.9, "c_iq_learn": 1.2, "bc": 0.0}
+
+
+def _episodes(mean_return: float, success_percent: float, n: int, spread: float = 50.0):
+    successes = [i < round(success_percent * n / 100) for i in range(n)]
+    # symmetric deviations: the mean is exactly mean_return
+    returns = [mean_return + (spread if i % 2 else -spread) for i in range(n)]
+    lengths = [300 + (i % 7) if s else 1000 for i, s in enumerate(successes)]
+    return successes, returns, lengths
+
+
+def make_fake_run(root: Path, label: str, *, seed: int = 0, env: str = "antmaze_medium", k: int = 10,
+                  horizon: int = 1000, strength: float = 1.0, deploy=(None, None), train=(None, None),
+                  episodes: int = 1000, curve: bool = True) -> Path:
+    """A run directory as the trainers write it: resolved config, eval JSONs, curve CSV."""
+    causal = label.startswith("c_")
+    algo = label[2:] if causal else label
+    run_dir = root / env / f"h{horizon}-cs{strength}-k{k}" / label / f"seed{seed}"
+    (run_dir / "eval").mkdir(parents=True)
+    OmegaConf.save(OmegaConf.create({
+        "env": {"name": env, "horizon": horizon, "confounding_strength": strength},
+        "window": {"k": k, "window_matched": False}, "algo": {"name": algo}, "causal": causal, "seed": seed,
+    }), run_dir / "config.yaml")
+    for regime, (mean_return, success) in (("deploy", deploy), ("train", train)):
+        if mean_return is None:
+            continue
+        s, r, n = _episodes(mean_return, success, episodes)
+        result = EvaluationResult(regime, s, r, n, seeds=[seed],
+                                  trajectories=[[[0.0, 0.0], [1.0, 1.0], [2.0, 1.5]]] if regime == "deploy" else ())
+        data = result.to_dict()
+        data["maze"] = {"walls": [[-1.0, -1.0, 3.0, -0.5]], "goal": [2.0, 2.0], "start": [0.0, 0.0]}
+        eval_path(run_dir, regime).write_text(json.dumps(data))
+    if curve and label != "expert":
+        scalars = run_dir / "logs" / "scalars" / "eval"
+        scalars.mkdir(parents=True)
+        (scalars / "train_return.csv").write_text("".join(f"{s},{train[0] - 100 + s / 100}\n" for s in (0, 5000, 10000)))
+    return run_dir
+
+
+@pytest.fixture
+def paper_runs(tmp_path: Path) -> Path:
+    for label, (mean_return, success) in PAPER_RAW.items():
+        train_success = 87.0 if label != "expert" else 90.0
+        make_fake_run(tmp_path, label, deploy=(mean_return, success), train=(-110.0, train_success))
+    return tmp_path
+
+
+def test_normalised_table_reproduces_paper_table1(paper_runs: Path) -> None:
+    (setting, table), = aggregate(load_runs(paper_runs)).items()
+    assert setting.env == "antmaze_medium" and setting.k == 10
+    normalised = normalised_returns(table)
+    for label, expected in PAPER_NORMALISED.items():
+        assert normalised[label] == pytest.approx(expected, abs=0.15), label
+    assert min(normalised.values()) == 0.0
+    for label, se in PAPER_SUCCESS_SE.items():
+        assert round(100 * table[label]["deploy"].success_se, 1) == se, label
+        assert table[label]["deploy"].success_rate == pytest.approx(PAPER_RAW[label][1] / 100)
+
+
+def test_report_writes_markdown_csv_and_figures(paper_runs: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    report = write_report(paper_runs, out, name="antmaze_medium", command="python -m torchrl_causal.train ...")
+    with open(report.csv, newline="") as handle:
+        reader = csv.DictReader(handle)
+        assert tuple(reader.fieldnames) == CSV_COLUMNS
+        rows = list(reader)
+    assert [(r["algorithm"], r["regime"]) for r in rows] == [(a, g) for a in TABLE1_ALGORITHMS for g in ("train", "deploy")]
+    expert_deploy = next(r for r in rows if r["algorithm"] == "expert" and r["regime"] == "deploy")
+    assert float(expert_deploy["success_rate"]) == pytest.approx(0.876)
+    assert float(expert_deploy["return_mean"]) == pytest.approx(-104.0)
+    assert int(expert_deploy["n_episodes"]) == 1000 and int(expert_deploy["seeds"]) == 1
+    bc_deploy = next(r for r in rows if r["algorithm"] == "bc" and r["regime"] == "deploy")
+    assert bc_deploy["ep_len_mean"] == ""  # no successful episode: no length
+
+    text = report.markdown.read_text()
+    header = next(line for line in text.splitlines() if line.startswith("|  | Expert"))
+    assert header.split("|")[2:-1] == [" " + h + " " for h in
+                                       ("Expert", "C-BC", "C-GAIL", "C-SQIL", "C-IQ-Learn", "BC", "GAIL", "SQIL", "IQ-Learn")]
+    assert "**275.7** ± 50.0" in text  # best non-expert normalised E[Y] in bold (C-SQIL)
+    assert "**90.7** ± 0.9" in text
+    assert "python -m torchrl_causal.train ..." in text
+    names = {p.name for p in report.figures}
+    assert names == {"antmaze_medium_training_curves.png", "antmaze_medium_trajectories.png"}
+    assert all(p.stat().st_size > 1000 for p in report.figures)
+
+
+def test_effect_checks_on_the_paper_numbers(paper_runs: Path) -> None:
+    (table,) = aggregate(load_runs(paper_runs)).values()
+    checks = {c.claim: c.passed for c in effect_checks(table)}
+    assert len(checks) == 2 + 4 + 4
+    assert all(checks.values())  # the paper's own numbers satisfy the paper's claims
+    # a non-causal method at half the expert's deploy success breaks the <= 20% claim
+    table["sqil"]["deploy"] = EvaluationResult("deploy", *_episodes(-200.0, 45.0, 100))
+    failed = [c for c in effect_checks(table) if not c.passed]
+    assert [c.claim for c in failed] == ["SQIL deploy success <= 20% of the expert's"]
+
+
+def test_seeds_pool_and_ablation_plots(tmp_path: Path) -> None:
+    for seed in (0, 1):
+        make_fake_run(tmp_path, "c_sqil", seed=seed, deploy=(-100.0 - seed * 10, 80.0 + seed * 10),
+                      train=(-90.0, 90.0), episodes=100)
+    for k, success in ((0, 20.0), (2, 85.0)):
+        make_fake_run(tmp_path, "c_sqil", k=k, deploy=(-150.0, success), train=(-90.0, 90.0), episodes=100)
+    aggregated = aggregate(load_runs(tmp_path))
+    assert len(aggregated) == 3
+    main = max(aggregated, key=lambda s: aggregated[s]["c_sqil"]["deploy"].n_episodes)
+    pooled = aggregated[main]["c_sqil"]["deploy"]
+    assert (pooled.n_episodes, len(set(pooled.seeds))) == (200, 2)
+    assert pooled.success_rate == pytest.approx(0.85) and pooled.return_mean == pytest.approx(-105.0)
+
+    report = write_report(tmp_path, tmp_path / "out")
+    assert report.main_setting.k == 10  # the setting with the most runs (two seeds)
+    assert "antmaze_medium_ablation_k.png" in {p.name for p in report.figures}
+    assert not any("ablation_horizon" in p.name for p in report.figures)
+    with open(report.all_csv, newline="") as handle:
+        assert sorted(int(r["k"]) for r in csv.DictReader(handle)) == [0, 0, 2, 2, 10, 10]
+
+
+def test_notes_survive_regeneration_and_cli(paper_runs: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "out"
+    report_main([f"runs={paper_runs}", f"out={out}", "name=t"])
+    md = out / "t.md"
+    md.write_text(md.read_text() + "\n<!-- notes: kept when the report is regenerated -->\nWhy X.\n<!-- /notes -->\n")
+    report_main([f"runs={paper_runs}", f"out={out}", "name=t"])
+    assert "Why X." in md.read_text()
+    assert "Norm. E[Y]" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="unknown argument"):
+        report_main([f"runs={paper_runs}", "colour=red"])
+    with pytest.raises(FileNotFoundError, match="no evaluated runs"):
+        write_report(tmp_path / "out", tmp_path / "elsewhere")
+
+
+def test_corrupt_run_is_named(tmp_path: Path) -> None:
+    run = make_fake_run(tmp_path, "bc", deploy=(-1.0, 1.0), train=(-1.0, 1.0), episodes=4)
+    OmegaConf.save(OmegaConf.create({"env": {"name": "x"}}), run / "config.yaml")
+    with pytest.raises(ValueError, match="env.horizon"):
+        load_runs(tmp_path)
+    assert math.isnan(EvaluationResult("deploy", [], [], []).success_rate)

@@ -1,0 +1,36 @@
+"""Deployment evaluation, the paper's tables and the report's figures.
+
+* :func:`evaluate_policy` runs batched episodes and returns an :class:`EvaluationResult`
+  (success rate ± SE, raw E[Y] ± std, lengths of successful episodes);
+* :func:`load_runs` reads run directories back; :func:`write_report` turns them into
+  Table 1 (normalised E[Y]), the raw and episode-length tables, the results CSV and
+  PNG figures.
+"""
+
+from torchrl_causal.evaluation.metrics import EvaluationResult, evaluate_policy
+from torchrl_causal.evaluation.report import Report, write_report
+from torchrl_causal.evaluation.runs import RunRecord, Setting, eval_path, load_run, load_runs
+from torchrl_causal.evaluation.tables import (
+    CSV_COLUMNS,
+    TABLE1_ALGORITHMS,
+    aggregate,
+    effect_checks,
+    normalised_returns,
+)
+
+__all__ = [
+    "CSV_COLUMNS",
+    "EvaluationResult",
+    "Report",
+    "RunRecord",
+    "Setting",
+    "TABLE1_ALGORITHMS",
+    "aggregate",
+    "effect_checks",
+    "eval_path",
+    "evaluate_policy",
+    "load_run",
+    "load_runs",
+    "normalised_returns",
+    "write_report",
+]

@@ -1,0 +1,124 @@
+"""Writes the report of a folder of runs: Markdown tables, the results CSV and figures."""
+
+from __future__ import annotations
+
+import re
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from torchrl_causal.evaluation.plots import ABLATION_AXES, plot_ablation, plot_training_curves, plot_trajectories
+from torchrl_causal.evaluation.runs import RunRecord, Setting, load_runs
+from torchrl_causal.evaluation.tables import (
+    CSV_COLUMNS,
+    aggregate,
+    csv_rows,
+    effect_checks,
+    effect_markdown,
+    lengths_markdown,
+    raw_markdown,
+    table1_markdown,
+    write_csv,
+)
+
+__all__ = ["Report", "write_report", "NOTES_BEGIN", "NOTES_END"]
+
+# Hand-written analysis between these markers survives regeneration of the Markdown file.
+NOTES_BEGIN = "<!-- notes: kept when the report is regenerated -->"
+NOTES_END = "<!-- /notes -->"
+
+
+@dataclass
+class Report:
+    """What :func:`write_report` wrote."""
+
+    markdown: Path
+    csv: Path
+    all_csv: Path
+    figures: list[Path] = field(default_factory=list)
+    main_setting: Setting | None = None
+
+
+def _main_setting(runs: Sequence[RunRecord]) -> Setting:
+    counts: dict[Setting, int] = defaultdict(int)
+    for run in runs:
+        counts[run.setting] += 1
+    # Most runs first; ties go to the strongest confounding and the longest horizon,
+    # which is the paper's default configuration.
+    return max(counts, key=lambda s: (counts[s], s.strength, s.horizon, -s.k))
+
+
+def _kept_notes(path: Path) -> str:
+    if not path.is_file():
+        return ""
+    match = re.search(re.escape(NOTES_BEGIN) + r".*?" + re.escape(NOTES_END), path.read_text(), flags=re.S)
+    return match.group(0) if match else ""
+
+
+def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, name: str | None = None,
+                 command: str | None = None) -> Report:
+    """Reads every run below ``runs_root`` and writes ``<out_dir>/<name>.{md,csv}``,
+    ``<name>_all.csv`` (every setting, with setting columns) and the PNG figures.
+
+    ``<name>.csv`` holds the main setting (the one with the most runs) with exactly the
+    columns :data:`~torchrl_causal.evaluation.tables.CSV_COLUMNS`.
+    """
+    runs = load_runs(runs_root)
+    if not runs:
+        raise FileNotFoundError(f"no evaluated runs below {runs_root} (expected */config.yaml with eval/*.json)")
+    out_dir = Path(out_dir) if out_dir is not None else Path(runs_root) / "report"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    envs = sorted({run.setting.env for run in runs})
+    name = name or (envs[0] if len(envs) == 1 else "report")
+    aggregated = aggregate(runs)
+    main = _main_setting(runs)
+
+    report = Report(out_dir / f"{name}.md", out_dir / f"{name}.csv", out_dir / f"{name}_all.csv", main_setting=main)
+    write_csv(csv_rows(aggregated[main]), report.csv)
+    all_rows = [
+        {"env": s.env, "horizon": s.horizon, "strength": s.strength, "k": s.k, **row}
+        for s in sorted(aggregated) for row in csv_rows(aggregated[s])
+    ]
+    write_csv(all_rows, report.all_csv, columns=("env", "horizon", "strength", "k", *CSV_COLUMNS))
+
+    main_runs = [r for r in runs if r.setting == main]
+    by_label: dict[str, list[RunRecord]] = defaultdict(list)
+    for run in main_runs:
+        by_label[run.label].append(run)
+    figures = {
+        "training curves": plot_training_curves(main_runs, out_dir / f"{name}_training_curves.png"),
+        "deploy-regime trajectories": plot_trajectories(by_label, out_dir / f"{name}_trajectories.png"),
+    }
+    for axis in ABLATION_AXES:
+        figures[f"{ABLATION_AXES[axis]} ablation"] = plot_ablation(aggregated, axis, out_dir / f"{name}_ablation_{axis}.png")
+    report.figures = [p for p in figures.values() if p is not None]
+
+    lines = [f"# Results: {name}", ""]
+    if command:
+        lines += ["Regenerate with:", "", "```bash", command.strip(), "```", ""]
+    notes = _kept_notes(report.markdown)
+    if notes:
+        lines += [notes, ""]
+    ordered = [main] + sorted(s for s in aggregated if s != main)
+    for setting in ordered:
+        table = aggregated[setting]
+        seeds = sorted({r.seed for r in runs if r.setting == setting})
+        lines += [f"## {setting.describe()}", "",
+                  f"Seeds: {', '.join(map(str, seeds))}. Normalised E[Y] shifts the worst algorithm of the row to 0 "
+                  "(the reward is purely negative); ± is the return's standard deviation and the success "
+                  "rate's standard error.", ""]
+        for regime in ("deploy", "train"):
+            if any(regime in regimes for regimes in table.values()):
+                lines += [f"### {regime.capitalize()} regime (Table 1 layout)", "", table1_markdown(table, regime), ""]
+        lines += ["### Raw E[Y] and success rate", "", raw_markdown(table), "",
+                  "### Mean length of successful episodes", "", lengths_markdown(table), ""]
+        checks = effect_checks(table)
+        if checks:
+            lines += ["### The paper's effect, checked", "", effect_markdown(checks), ""]
+    if report.figures:
+        lines += ["## Figures", ""]
+        lines += [f"![{title}]({path.name})" for title, path in figures.items() if path is not None]
+        lines.append("")
+    report.markdown.write_text("\n".join(lines))
+    return report

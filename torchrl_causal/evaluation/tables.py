@@ -1,0 +1,261 @@
+"""The paper's tables from evaluation results: Table 1, the raw table, episode lengths.
+
+Table 1 (Section 4) lists, per task, the expert and the eight algorithms in the order
+Expert, C-BC, C-GAIL, C-SQIL, C-IQ-Learn, BC, GAIL, SQIL, IQ-Learn, with the normalised
+``E[Y]`` (the return shifted so that the worst algorithm of the row sits at 0, since the
+reward is purely negative; the spread is unchanged) and the success rate, each with its
+spread (standard deviation of the return, standard error of the success rate).
+Appendix F adds the unnormalised table and the mean length of successful episodes.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections import defaultdict
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from torchrl_causal.evaluation.metrics import EvaluationResult
+from torchrl_causal.evaluation.runs import RunRecord, Setting
+
+__all__ = [
+    "TABLE1_ALGORITHMS",
+    "CSV_COLUMNS",
+    "REGIMES",
+    "display_name",
+    "ordered_labels",
+    "aggregate",
+    "normalised_returns",
+    "csv_rows",
+    "write_csv",
+    "table1_markdown",
+    "raw_markdown",
+    "lengths_markdown",
+    "EffectCheck",
+    "effect_checks",
+    "effect_markdown",
+]
+
+TABLE1_ALGORITHMS: tuple[str, ...] = (
+    "expert", "c_bc", "c_gail", "c_sqil", "c_iq_learn", "bc", "gail", "sqil", "iq_learn",
+)
+_DISPLAY = {
+    "expert": "Expert", "c_bc": "C-BC", "c_gail": "C-GAIL", "c_sqil": "C-SQIL", "c_iq_learn": "C-IQ-Learn",
+    "bc": "BC", "gail": "GAIL", "sqil": "SQIL", "iq_learn": "IQ-Learn",
+}
+CSV_COLUMNS: tuple[str, ...] = (
+    "algorithm", "regime", "success_rate", "success_se", "return_mean", "return_std",
+    "ep_len_mean", "ep_len_std", "n_episodes", "seeds",
+)
+REGIMES: tuple[str, ...] = ("train", "deploy")
+
+# label -> regime -> result pooled over seeds
+Table = Mapping[str, Mapping[str, EvaluationResult]]
+
+
+def display_name(label: str) -> str:
+    """Column header of a run label.
+
+    Examples:
+        >>> display_name("c_iq_learn"), display_name("sqil_wm")
+        ('C-IQ-Learn', 'SQIL (window-matched)')
+    """
+    if label.endswith("_wm") and label[:-3] in _DISPLAY:
+        return f"{_DISPLAY[label[:-3]]} (window-matched)"
+    return _DISPLAY.get(label, label)
+
+
+def ordered_labels(labels: Iterable[str]) -> list[str]:
+    """Table 1's order first, any other label (window-matched baselines) after, sorted."""
+    labels = set(labels)
+    return [a for a in TABLE1_ALGORITHMS if a in labels] + sorted(labels - set(TABLE1_ALGORITHMS))
+
+
+def aggregate(runs: Iterable[RunRecord]) -> dict[Setting, dict[str, dict[str, EvaluationResult]]]:
+    """Groups runs by setting and label and pools each regime's episodes over seeds."""
+    grouped: dict[Setting, dict[str, dict[str, list[EvaluationResult]]]] = defaultdict(
+        lambda: defaultdict(lambda: defaultdict(list))
+    )
+    for run in runs:
+        for regime, result in run.evaluations.items():
+            grouped[run.setting][run.label][regime].append(result)
+    return {
+        setting: {
+            label: {regime: EvaluationResult.pool(results) for regime, results in regimes.items()}
+            for label, regimes in labels.items()
+        }
+        for setting, labels in grouped.items()
+    }
+
+
+def normalised_returns(table: Table, regime: str = "deploy") -> dict[str, float]:
+    """Mean returns shifted so that the worst algorithm of ``regime`` sits at 0.
+
+    Examples:
+        >>> r = lambda ret: {"deploy": EvaluationResult("deploy", [False], [ret], [1])}
+        >>> normalised_returns({"expert": r(-104.0), "bc": r(-375.3), "c_sqil": r(-99.6)})
+        {'expert': 271.3, 'bc': 0.0, 'c_sqil': 275.7}
+    """
+    means = {label: regimes[regime].return_mean for label, regimes in table.items() if regime in regimes}
+    if not means:
+        return {}
+    worst = min(means.values())
+    return {label: round(mean - worst, 10) for label, mean in means.items()}
+
+
+def csv_rows(table: Table) -> list[dict[str, object]]:
+    """One row per algorithm and regime, with :data:`CSV_COLUMNS`."""
+    rows = []
+    for label in ordered_labels(table):
+        for regime in REGIMES:
+            if regime in table[label]:
+                rows.append({"algorithm": label, **table[label][regime].summary()})
+    return rows
+
+
+def write_csv(rows: Sequence[Mapping[str, object]], path: str | Path, columns: Sequence[str] = CSV_COLUMNS) -> None:
+    with open(path, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(columns), extrasaction="ignore")
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()})
+
+
+def _pm(value: float, spread: float, digits: int = 1, bold: bool = False) -> str:
+    if math.isnan(value):
+        return "—"
+    text = f"{value:.{digits}f}"
+    text = f"**{text}**" if bold else text
+    return f"{text} ± {spread:.{digits}f}" if not math.isnan(spread) else text
+
+
+def _best_non_expert(values: Mapping[str, float]) -> str | None:
+    candidates = {label: v for label, v in values.items() if label != "expert" and not math.isnan(v)}
+    return max(candidates, key=candidates.get) if candidates else None
+
+
+def _markdown(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def table1_markdown(table: Table, regime: str = "deploy") -> str:
+    """Table 1's layout: one column per algorithm, normalised E[Y] and success rate rows.
+
+    The best non-expert entry of each row is bold, as in the paper.
+    """
+    labels = [label for label in ordered_labels(table) if regime in table[label]]
+    results = {label: table[label][regime] for label in labels}
+    normalised = normalised_returns(table, regime)
+    success = {label: 100 * r.success_rate for label, r in results.items()}
+    best_return, best_success = _best_non_expert(normalised), _best_non_expert(success)
+    header = [""] + [display_name(label) for label in labels]
+    rows = [
+        ["Norm. E[Y]"] + [
+            _pm(normalised[label], results[label].return_std, bold=label == best_return) for label in labels
+        ],
+        ["Success rate (%)"] + [
+            _pm(success[label], 100 * results[label].success_se, bold=label == best_success) for label in labels
+        ],
+    ]
+    return _markdown(header, rows)
+
+
+def raw_markdown(table: Table) -> str:
+    """Appendix F's unnormalised table, both regimes side by side."""
+    header = ["Algorithm"]
+    for regime in REGIMES:
+        header += [f"E[Y] ({regime})", f"SR % ({regime})"]
+    header += ["episodes/regime", "seeds"]
+    rows = []
+    for label in ordered_labels(table):
+        row = [display_name(label)]
+        for regime in REGIMES:
+            result = table[label].get(regime)
+            row += (
+                [_pm(result.return_mean, result.return_std), _pm(100 * result.success_rate, 100 * result.success_se)]
+                if result is not None else ["—", "—"]
+            )
+        any_result = next(iter(table[label].values()))
+        row += [str(any_result.n_episodes), str(len(set(any_result.seeds)))]
+        rows.append(row)
+    return _markdown(header, rows)
+
+
+def lengths_markdown(table: Table) -> str:
+    """Appendix F's mean length (± std) of successful episodes; ``—`` when none succeeded."""
+    header = ["Algorithm"] + [f"length ({regime})" for regime in REGIMES]
+    rows = []
+    for label in ordered_labels(table):
+        row = [display_name(label)]
+        for regime in REGIMES:
+            result = table[label].get(regime)
+            row.append(_pm(result.ep_len_mean, result.ep_len_std, digits=0) if result is not None else "—")
+        rows.append(row)
+    return _markdown(header, rows)
+
+
+@dataclass(frozen=True)
+class EffectCheck:
+    """One of the paper's qualitative claims, measured on a table."""
+
+    claim: str
+    measured: str
+    passed: bool
+
+
+def effect_checks(
+    table: Table,
+    *,
+    causal_fraction: float = 0.8,
+    non_causal_fraction: float = 0.2,
+    train_gap_points: float = 10.0,
+) -> list[EffectCheck]:
+    """The paper's effect as checks: causal off-policy methods keep ``causal_fraction`` of
+    the expert's deploy success, non-causal methods keep at most ``non_causal_fraction`` of
+    it, and in the train regime each non-causal method is within ``train_gap_points`` of
+    its causal counterpart. Checks whose runs are missing are skipped.
+    """
+    checks: list[EffectCheck] = []
+
+    def rate(label: str, regime: str) -> float | None:
+        result = table.get(label, {}).get(regime)
+        return None if result is None else result.success_rate
+
+    expert = rate("expert", "deploy")
+    if expert is not None:
+        for label in ("c_sqil", "c_iq_learn"):
+            value = rate(label, "deploy")
+            if value is not None:
+                checks.append(EffectCheck(
+                    f"{display_name(label)} deploy success >= {causal_fraction:.0%} of the expert's",
+                    f"{100 * value:.1f}% vs {100 * expert:.1f}% ({value / expert:.0%})" if expert else f"{100 * value:.1f}%",
+                    value >= causal_fraction * expert,
+                ))
+        for label in ("bc", "gail", "sqil", "iq_learn"):
+            value = rate(label, "deploy")
+            if value is not None:
+                checks.append(EffectCheck(
+                    f"{display_name(label)} deploy success <= {non_causal_fraction:.0%} of the expert's",
+                    f"{100 * value:.1f}% vs {100 * expert:.1f}%",
+                    value <= non_causal_fraction * expert,
+                ))
+    for label in ("bc", "gail", "sqil", "iq_learn"):
+        plain, causal = rate(label, "train"), rate(f"c_{label}", "train")
+        if plain is not None and causal is not None:
+            gap = 100 * (plain - causal)
+            checks.append(EffectCheck(
+                f"{display_name(label)} within {train_gap_points:g} points of {display_name('c_' + label)} (train regime)",
+                f"{100 * plain:.1f}% vs {100 * causal:.1f}% ({gap:+.1f} points)",
+                abs(gap) <= train_gap_points,
+            ))
+    return checks
+
+
+def effect_markdown(checks: Sequence[EffectCheck]) -> str:
+    return _markdown(
+        ["Claim", "Measured", "Holds"], [[c.claim, c.measured, "yes" if c.passed else "**no**"] for c in checks]
+    )
