@@ -14,15 +14,26 @@ from torchrl_causal.envs.base import (
     GustProcess,
     rotate,
 )
+from torchrl_causal.envs.experts import RoverExpert
+from torchrl_causal.envs.planner import MAZE_MAPS, MazeLayout, MazePlanner
 from torchrl_causal.envs.route_choice import RouteChoiceEnv, route_choice_value
+from torchrl_causal.envs.rover_maze import ROVER_TASKS, RoverMazeEnv, RoverParameters, rover_dynamics
 
 __all__ = [
+    "MAZE_MAPS",
     "REGIMES",
+    "ROVER_TASKS",
     "CompassSensor",
     "ConfoundedEnv",
     "GustConfoundedEnv",
     "GustProcess",
+    "MazeLayout",
+    "MazePlanner",
     "RouteChoiceEnv",
+    "RoverExpert",
+    "RoverMazeEnv",
+    "RoverParameters",
     "rotate",
     "route_choice_value",
+    "rover_dynamics",
 ]

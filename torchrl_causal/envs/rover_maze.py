@@ -1,0 +1,242 @@
+"""Confounded RoverMaze: the CI-scale maze, a differential-drive rover in batched torch.
+
+The rover mirrors the Confounded AntMaze mechanism at a fraction of the cost (no MuJoCo):
+
+* the action X = (throttle, turn) in [-1, 1]^2 sets the heading O and the signed forward
+  (wheel) speed L, which carry over from step to step;
+* the position P moves by L along O, plus the push of the gust U; walls stop motion along
+  each blocked axis (the rover slides along walls and never crosses one);
+* the gust process of DESIGN.md (:class:`~torchrl_causal.envs.GustProcess`) pushes the
+  rover, costs reward, and contaminates the compass W (0.9 heading + 0.1 gust direction +
+  noise, tanh-bounded, rotated by ``confounding_strength * pi`` when deployed);
+* the reward is ``-1 - 0.1 |U_t|`` per step; reaching the goal radius ends the episode.
+
+The imitator observes P, L and W (and its own past actions); the heading O is latent
+(under ``("latent", "O")`` as ``(cos, sin)``, for experts only). L is a scalar on purpose:
+a velocity vector would reveal the heading in one observation, whereas with P and L the
+heading is recoverable only from a few lags of P (``P_t - P_{t-1} ~ L_t O_t``), which is
+what makes the window size matter. The initial heading is uniform, so nothing observed at
+reset says where the rover faces.
+
+Tasks (``(row, col)`` cells of the gymnasium-robotics maps, cell size 1, start position
+jittered by up to 0.1 in each axis): ``u``: (1, 1) → (3, 1); ``medium``: (1, 1) → (6, 6);
+``large``: (7, 1) → (7, 10). With the default speeds the expert needs about 300 steps on
+medium and 600 on large (see ``results/rover_speed.md``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from functools import cached_property
+from typing import TYPE_CHECKING
+
+import torch
+from torchrl.data import Bounded, Unbounded
+
+from torchrl_causal.envs.base import GustConfoundedEnv
+from torchrl_causal.envs.planner import MazeLayout
+
+if TYPE_CHECKING:
+    from torchrl_causal.graphs import TimeSliceTemplate
+
+__all__ = ["ROVER_TASKS", "RoverMazeEnv", "RoverParameters", "rover_dynamics"]
+
+ROVER_TASKS: dict[str, tuple[tuple[int, int], tuple[int, int]]] = {
+    "u": ((1, 1), (3, 1)),
+    "medium": ((1, 1), (6, 6)),
+    "large": ((7, 1), (7, 10)),
+}
+
+
+@dataclass(frozen=True)
+class RoverParameters:
+    """Physical constants of the rover (world units are maze cells).
+
+    Attributes:
+        max_speed: forward speed (cells per step) at full throttle.
+        turn_rate: heading change (radians per step) at full turn.
+        speed_response: fraction of the gap to the commanded speed closed each step.
+        gust_push: displacement per step per unit of gust force.
+        half_size: half-side of the rover's square footprint (collision box).
+        goal_radius: distance to the goal centre that counts as success.
+        start_jitter: half-width of the uniform jitter of the start position.
+    """
+
+    max_speed: float = 0.0275
+    turn_rate: float = 0.25
+    speed_response: float = 0.5
+    gust_push: float = 0.004
+    half_size: float = 0.15
+    goal_radius: float = 0.3
+    start_jitter: float = 0.1
+
+    def __post_init__(self) -> None:
+        if not 0 < self.half_size < 0.5:
+            raise ValueError(f"half_size must lie in (0, 0.5) cells, got {self.half_size}")
+        # A step longer than the free gap between two walls could jump over a wall cell.
+        longest_step = self.max_speed + self.gust_push * 5.0
+        if longest_step >= 1 - 2 * self.half_size:
+            raise ValueError(f"a step of up to {longest_step:.3f} cells could tunnel through walls")
+
+
+def _wrap_angle(angle: torch.Tensor) -> torch.Tensor:
+    return torch.remainder(angle + math.pi, 2 * math.pi) - math.pi
+
+
+def unit_heading(angle: torch.Tensor) -> torch.Tensor:
+    """``(cos, sin)`` of a heading angle ``batch + (1,)`` → ``batch + (2,)``."""
+    return torch.cat((torch.cos(angle), torch.sin(angle)), dim=-1)
+
+
+def rover_dynamics(
+    position: torch.Tensor,
+    heading: torch.Tensor,
+    speed: torch.Tensor,
+    action: torch.Tensor,
+    gust: torch.Tensor,
+    layout: MazeLayout,
+    params: RoverParameters,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """One step of the rover: ``(P_t, angle_t, L_t, X_t, U_t) -> (P_{t+1}, angle_{t+1}, L_{t+1})``.
+
+    The comments name the template edge (``src at lag -> dst``) each line makes true.
+
+    Examples:
+        >>> layout = MazeLayout.from_name("u")
+        >>> p, a, v = rover_dynamics(torch.tensor([[-1.0, 1.0]]), torch.zeros(1, 1), torch.zeros(1, 1),
+        ...                          torch.tensor([[1.0, 0.0]]), torch.zeros(1, 2), layout, RoverParameters())
+        >>> p.tolist(), v.tolist()  # half of full speed reached in one step, eastwards
+        ([[-0.9800000190734375, 1.0]], [[0.019999999552965164]])
+    """
+    throttle, turn = action.clamp(-1.0, 1.0).split(1, dim=-1)
+    # O_{t-1} -> O_t and X_{t-1} -> O_t: the heading persists and turns with the action.
+    heading = _wrap_angle(heading + params.turn_rate * turn)
+    # L_{t-1} -> L_t and X_{t-1} -> L_t: first-order response of the wheel speed to throttle.
+    speed = speed + params.speed_response * (params.max_speed * throttle - speed)
+    # O_t -> P_t, L_t -> P_t (lag 0) and the gust U_{t-1} (bidirected P edges in the template).
+    displacement = speed * unit_heading(heading) + params.gust_push * gust
+    # P_{t-1} -> P_t: the rover moves from where it was; each axis is blocked separately by walls.
+    moved_x = torch.stack((position[..., 0] + displacement[..., 0], position[..., 1]), dim=-1)
+    position = torch.where(layout.box_is_free(moved_x, params.half_size)[..., None], moved_x, position)
+    moved_y = torch.stack((position[..., 0], position[..., 1] + displacement[..., 1]), dim=-1)
+    position = torch.where(layout.box_is_free(moved_y, params.half_size)[..., None], moved_y, position)
+    return position, heading, speed
+
+
+class RoverMazeEnv(GustConfoundedEnv):
+    """The Confounded RoverMaze as a batched TorchRL env.
+
+    Keys: ``"P"`` (position, ``batch + (2,)``), ``"L"`` (signed forward speed,
+    ``batch + (1,)``), ``"W"`` (compass, ``batch + (2,)``), ``("latent", "O")`` (heading as
+    ``(cos, sin)``), ``("scm", "U")`` (gust force), ``"action"`` = (throttle, turn).
+
+    Args:
+        maze: ``"u"``, ``"medium"`` or ``"large"`` (gymnasium-robotics maps; see
+            :data:`ROVER_TASKS` for the start and goal cells).
+        batch_size, regime, confounding_strength, horizon, device, seed: see
+            :class:`~torchrl_causal.envs.ConfoundedEnv` (``horizon`` defaults to 1000).
+        params: the rover's :class:`RoverParameters`.
+
+    Examples:
+        >>> env = RoverMazeEnv(maze="medium", batch_size=(8,), regime="deploy", seed=0)
+        >>> td = env.rollout(5)
+        >>> td["P"].shape, td["L"].shape, td["W"].shape, td["latent", "O"].shape
+        (torch.Size([8, 5, 2]), torch.Size([8, 5, 1]), torch.Size([8, 5, 2]), torch.Size([8, 5, 2]))
+        >>> sorted(env.causal_template.latent)
+        ['O']
+    """
+
+    def __init__(self, maze: str = "medium", *, horizon: int = 1000, params: RoverParameters | None = None, **kwargs) -> None:
+        if maze not in ROVER_TASKS:
+            raise ValueError(f"unknown maze {maze!r}; expected one of {sorted(ROVER_TASKS)}")
+        self.maze = maze
+        self.params = RoverParameters() if params is None else params
+        self.layout = MazeLayout.from_name(maze)
+        self.start_cell, self.goal_cell = ROVER_TASKS[maze]
+        super().__init__(horizon=horizon, **kwargs)
+        self.start_position = self.layout.cell_center(torch.tensor(self.start_cell)).to(self.device)
+        self.goal_position = self.layout.cell_center(torch.tensor(self.goal_cell)).to(self.device)
+
+    @cached_property
+    def causal_template(self) -> TimeSliceTemplate:
+        """The rover's time slice: every edge is made true by :func:`rover_dynamics` or the env.
+
+        Directed ``(src, dst, lag)``: the heading and speed persist and respond to the
+        previous action; the position moves from the previous position along the current
+        heading at the current speed; the compass reads the heading; the expert acts on
+        position and heading. Bidirected: the gust U_s pushes P_{s+1}, deflects W_s and costs
+        reward at step s, and is held for 5 steps (``GustProcess.period``), so any two of
+        these nodes whose gusts lie fewer than 5 steps apart may share it: W_t with W up to
+        4 steps back, P_t with P up to 4 back, P_t with W up to 5 back (and at lag 0), W_t
+        with P up to 3 back; W and P share it with Y.
+        """
+        from torchrl_causal.graphs import TimeSliceTemplate
+
+        period = self.gust_process.period
+        directed = (
+            ("O", "O", 1), ("X", "O", 1),  # heading = previous heading + turn
+            ("L", "L", 1), ("X", "L", 1),  # speed responds to throttle
+            ("P", "P", 1), ("O", "P", 0), ("L", "P", 0),  # P_t = P_{t-1} + L_t O_t + push U_{t-1}
+            ("O", "W", 0),  # compass reads the heading (read_compass in _observation)
+            ("P", "X", 0), ("O", "X", 0),  # the expert (RoverExpert) steers from P and O
+        )
+        # W_t depends on U_t, P_t on U_{t-1}: nodes depending on U_a and U_b may share a gust iff |a - b| < period.
+        bidirected = (
+            *(("W", "W", lag) for lag in range(1, period)),
+            *(("P", "P", lag) for lag in range(1, period)),
+            *(("W", "P", lag) for lag in range(0, period + 1)),  # W_{t-lag} (U_{t-lag}) ~ P_t (U_{t-1})
+            *(("P", "W", lag) for lag in range(1, period - 1)),  # P_{t-lag} (U_{t-lag-1}) ~ W_t (U_t)
+        )
+        return TimeSliceTemplate(
+            variables=("P", "L", "O", "W", "X"),
+            action="X",
+            observed=("P", "L", "W", "X"),
+            directed=directed,
+            bidirected=bidirected,
+            reward_parents=("P",),  # -1 per step until P is within the goal radius
+            reward_bidirected=("P", "W"),  # the gust penalty shares U with the push and the compass
+        )
+
+    def config(self) -> dict[str, object]:
+        return {**super().config(), "maze": self.maze, "params": asdict(self.params)}
+
+    def _make_variable_specs(self):
+        batch = self.batch_size
+        variables = {
+            "P": Unbounded(shape=(*batch, 2), device=self.device),
+            "L": Bounded(-self.params.max_speed, self.params.max_speed, shape=(*batch, 1), device=self.device),
+            "W": Bounded(-math.sqrt(2), math.sqrt(2), shape=(*batch, 2), device=self.device),
+            ("latent", "O"): Bounded(-1.0, 1.0, shape=(*batch, 2), device=self.device),
+        }
+        return Bounded(-1.0, 1.0, shape=(*batch, 2), device=self.device), variables
+
+    def _reset_state(self, mask: torch.Tensor) -> None:
+        shape = self._success.shape
+        jitter = (2 * torch.rand((*shape[:-1], 2), generator=self.rng, device=self.device) - 1) * self.params.start_jitter
+        position = self.start_position + jitter
+        heading = (2 * torch.rand(shape, generator=self.rng, device=self.device) - 1) * math.pi
+        if not hasattr(self, "position"):
+            self.position, self.heading, self.speed = position, heading, torch.zeros(shape, device=self.device)
+        self.position = torch.where(mask, position, self.position)
+        self.heading = torch.where(mask, heading, self.heading)
+        self.speed = torch.where(mask, 0.0, self.speed)
+
+    def _transition(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        # The reward of step t pays for the gust U_t that blows during it.
+        reward = -1.0 - self.gust_penalty()
+        self.position, self.heading, self.speed = rover_dynamics(
+            self.position, self.heading, self.speed, action, self.gust, self.layout, self.params
+        )
+        success = (self.position - self.goal_position).norm(dim=-1, keepdim=True) < self.params.goal_radius
+        return reward, success
+
+    def _observation(self) -> dict[str, object]:
+        heading = unit_heading(self.heading)
+        return {
+            "P": self.position,
+            "L": self.speed,
+            "W": self.read_compass(heading),
+            "latent": {"O": heading},
+            **self.scm_observation(),
+        }
