@@ -1,0 +1,408 @@
+"""CausalWindowTransform: exact encodings, partial resets, offline = online, specs, state, errors.
+
+The env below makes every value a closed-form function of (episode step t, env index i),
+so the expected encoding of Algorithm 2 (concatenate each admissible variable at lags
+0..k, the previous actions at lags 1..k, zero before the episode's first step) can be
+written independently of the transform's buffers.
+"""
+
+from __future__ import annotations
+
+import io
+
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Bounded, Composite, Unbounded
+from torchrl.envs import Compose, EnvBase, InitTracker, SerialEnv, TransformedEnv
+from torchrl.envs.utils import check_env_specs
+
+from torchrl_causal.graphs.window import AdjustmentWindow
+from torchrl_causal.transforms import CausalWindowTransform
+
+# --------------------------------------------------------------------------- tiny env
+
+
+def p_value(t: torch.Tensor, i: torch.Tensor) -> torch.Tensor:
+    """Observed P_t (2 dims, >= 1 so its spec excludes the zero padding)."""
+    return torch.stack([t + 1.0, i + 1.0], -1)
+
+
+def v_value(t: torch.Tensor, i: torch.Tensor) -> torch.Tensor:
+    """Observed V_t (1 dim)."""
+    return (-(t + 1.0) * (i + 1.0) - 0.5).unsqueeze(-1)
+
+
+def w_value(t: torch.Tensor, i: torch.Tensor) -> torch.Tensor:
+    """The collider W_t (1 dim), excluded by causal windows."""
+    return (1000.0 + t + 10.0 * i).unsqueeze(-1)
+
+
+def action_value(t: torch.Tensor, i: torch.Tensor) -> torch.Tensor:
+    """What :func:`counting_policy` plays at step t in env i."""
+    return (10.0 * (t + 1.0) + i).unsqueeze(-1)
+
+
+def counting_policy(td: TensorDictBase) -> TensorDictBase:
+    """Reads the raw admissible key P (the transform keeps it) and plays action_value."""
+    p = td["P"]
+    return td.set("action", action_value(p[..., 0] - 1, p[..., 1] - 1))
+
+
+class CountingEnv(EnvBase):
+    """Env i of the batch runs episodes of ``lengths[i]`` steps; values encode (t, i)."""
+
+    def __init__(self, lengths=(2, 3, 4, 5), drop: str | None = None) -> None:
+        lengths = torch.as_tensor(lengths)
+        super().__init__(batch_size=lengths.shape)
+        self.lengths = lengths
+        self.index = torch.arange(lengths.numel()).reshape(lengths.shape).float()
+        self.t = torch.zeros(lengths.shape)
+        batch = self.batch_size
+        specs = {
+            "P": Bounded(1.0, 1000.0, shape=(*batch, 2)),
+            "V": Unbounded(shape=(*batch, 1)),
+            "W": Bounded(1000.0, 2000.0, shape=(*batch, 1)),
+            "latent": Composite(O=Unbounded(shape=(*batch, 1)), shape=batch),
+        }
+        specs.pop(drop, None)
+        self.observation_spec = Composite(specs, shape=batch)
+        self.action_spec = Bounded(-1000.0, 1000.0, shape=(*batch, 1))
+        self.reward_spec = Unbounded(shape=(*batch, 1))
+
+    def _observe(self) -> TensorDict:
+        t, i = self.t, self.index
+        values = {"P": p_value(t, i), "V": v_value(t, i), "W": w_value(t, i), ("latent", "O"): -t.unsqueeze(-1)}
+        keys = set(self.observation_spec.keys(True, True))
+        return TensorDict({key: v for key, v in values.items() if key in keys}, batch_size=self.batch_size)
+
+    def _reset(self, tensordict: TensorDictBase | None) -> TensorDictBase:
+        reset = None if tensordict is None else tensordict.get("_reset", None)
+        if reset is None:
+            self.t.zero_()
+        else:
+            self.t[reset.reshape(self.batch_size)] = 0
+        out = self._observe()
+        out["done"] = torch.zeros((*self.batch_size, 1), dtype=torch.bool)
+        out["terminated"] = out["done"].clone()
+        return out
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        self.t += 1
+        out = self._observe()
+        out["done"] = (self.t >= self.lengths).unsqueeze(-1)
+        out["terminated"] = out["done"].clone()
+        out["reward"] = tensordict["action"].clone()
+        return out
+
+    def _set_seed(self, seed: int | None) -> None:
+        """Deterministic env."""
+
+
+# --------------------------------------------------------------------------- windows and reference
+
+K = 2
+CAUSAL = AdjustmentWindow(
+    k=K, action="X", lags={"P": (0, 1, 2), "V": (0, 2), "X": (1, 2)}, excluded=frozenset({"W"}), observed=("P", "V", "W", "X")
+)
+NONCAUSAL = AdjustmentWindow(k=1, action="X", lags={"P": (0,), "V": (0,), "W": (0,), "X": (1,)}, observed=("P", "V", "W", "X"))
+MATCHED = AdjustmentWindow(
+    k=K, action="X", lags={"P": (0, 1, 2), "V": (0, 1, 2), "W": (0, 1, 2), "X": (1, 2)}, observed=("P", "V", "W", "X")
+)
+VALUE = {"P": p_value, "V": v_value, "W": w_value, "X": action_value}
+
+
+def expected_encoding(window: AdjustmentWindow, t: int, i: int) -> torch.Tensor:
+    """Encode(s, t) of env i, `t` steps into its episode, from the closed forms above."""
+    blocks = []
+    for var, lags in window.lags.items():
+        for lag in lags:
+            value = VALUE[var](torch.tensor(float(t - lag)), torch.tensor(float(i)))
+            blocks.append(value if t - lag >= 0 else torch.zeros_like(value))
+    return torch.cat(blocks)
+
+
+def episode_steps(lengths: list[int], steps: int) -> list[list[int]]:
+    """Per env, the within-episode step of the root observation at rollout steps 0..steps-1."""
+    return [[s % n for s in range(steps)] for n in lengths]
+
+
+# --------------------------------------------------------------------------- layout
+
+
+def test_feature_layout_follows_window_order_then_increasing_lag():
+    transform = CausalWindowTransform(CAUSAL)
+    layout = transform.feature_layout({"P": (2,), "V": (1,), "X": (1,)})
+    assert [(f.variable, f.lag) for f in layout] == [("P", 0), ("P", 1), ("P", 2), ("V", 0), ("V", 2), ("X", 1), ("X", 2)]
+    starts = [f.columns.start for f in layout]
+    assert starts == [0, 2, 4, 6, 7, 8, 9] and layout[-1].columns.stop == 10
+
+
+# --------------------------------------------------------------------------- exact online values
+
+
+def test_single_env_exact_tensors_with_zero_padding():
+    env = TransformedEnv(CountingEnv(lengths=[5]), CausalWindowTransform(CAUSAL))
+    rollout = env.rollout(3, counting_policy)
+    # columns: P_t (2), P_{t-1} (2), P_{t-2} (2), V_t, V_{t-2}, X_{t-1}, X_{t-2}; env index 0
+    expected = torch.tensor(
+        [
+            [1, 1, 0, 0, 0, 0, -1.5, 0, 0, 0],
+            [2, 1, 1, 1, 0, 0, -2.5, 0, 10, 0],
+            [3, 1, 2, 1, 1, 1, -3.5, -1.5, 20, 10],
+        ]
+    )
+    torch.testing.assert_close(rollout["observation"][0], expected, rtol=0, atol=0)
+    torch.testing.assert_close(
+        rollout["next", "observation"][0, -1],
+        torch.tensor([4.0, 1, 3, 1, 2, 1, -4.5, -2.5, 30, 20]),
+        rtol=0,
+        atol=0,
+    )
+    assert "W" not in rollout.keys() and "latent" not in rollout.keys()
+    assert "W" not in rollout["next"].keys() and "latent" not in rollout["next"].keys()
+    assert "P" in rollout.keys() and "V" in rollout["next"].keys()
+
+
+@pytest.mark.parametrize("window", [CAUSAL, NONCAUSAL, MATCHED], ids=["causal", "noncausal", "matched"])
+def test_batch_of_4_with_partial_resets_matches_closed_form(window):
+    lengths = [2, 3, 4, 5]
+    env = TransformedEnv(CountingEnv(lengths), CausalWindowTransform(window))
+    steps = 9
+    rollout = env.rollout(steps, counting_policy, break_when_any_done=False)
+    for i, env_steps in enumerate(episode_steps(lengths, steps)):
+        for s, t in enumerate(env_steps):
+            torch.testing.assert_close(rollout["observation"][i, s], expected_encoding(window, t, i), rtol=0, atol=0)
+            torch.testing.assert_close(
+                rollout["next", "observation"][i, s], expected_encoding(window, t + 1, i), rtol=0, atol=0
+            )
+    assert ("W" in rollout.keys()) == ("W" in window.lags)
+
+
+def test_explicit_partial_reset_clears_only_the_masked_env():
+    env = TransformedEnv(CountingEnv([50, 50, 50, 50]), CausalWindowTransform(CAUSAL))
+    td = env.reset()
+    for _ in range(3):
+        td = env.step(counting_policy(td))["next"]
+    reset = torch.tensor([False, True, False, True]).unsqueeze(-1)
+    td = env.reset(td.set("_reset", reset))
+    for _ in range(2):
+        td = env.step(counting_policy(td))["next"]
+    for i, t in enumerate([5, 2, 5, 2]):
+        torch.testing.assert_close(td["observation"][i], expected_encoding(CAUSAL, t, i), rtol=0, atol=0)
+
+
+def test_any_batch_shape():
+    lengths = torch.tensor([[2, 3], [4, 5]])
+    env = TransformedEnv(CountingEnv(lengths), CausalWindowTransform(CAUSAL))
+    rollout = env.rollout(6, counting_policy, break_when_any_done=False)
+    assert rollout["observation"].shape == (2, 2, 6, 10)
+    for i, n in enumerate(lengths.flatten().tolist()):
+        for s in range(6):
+            torch.testing.assert_close(
+                rollout["observation"].flatten(0, 1)[i, s], expected_encoding(CAUSAL, s % n, i), rtol=0, atol=0
+            )
+
+
+# --------------------------------------------------------------------------- offline = online
+
+
+def random_window(data) -> AdjustmentWindow:
+    k = data.draw(st.integers(0, 4), label="k")
+    lag_sets = {
+        "P": data.draw(st.sets(st.integers(0, k), min_size=1), label="P lags"),
+        "V": data.draw(st.sets(st.integers(0, k)), label="V lags"),
+        "X": data.draw(st.sets(st.integers(1, k)) if k else st.just(set()), label="X lags"),
+    }
+    return AdjustmentWindow(
+        k=k, action="X", lags={var: tuple(sorted(lags)) for var, lags in lag_sets.items()}, excluded=frozenset({"W"})
+    )
+
+
+@settings(max_examples=25, deadline=None)
+@given(data=st.data())
+def test_offline_encoding_equals_online_on_random_episodes(data):
+    window = random_window(data)
+    lengths = data.draw(st.lists(st.integers(1, 7), min_size=1, max_size=4), label="episode lengths")
+    steps = data.draw(st.integers(1, 16), label="rollout steps")
+    seed = data.draw(st.integers(0, 2**16), label="seed")
+    generator = torch.Generator().manual_seed(seed)
+
+    def random_policy(td):
+        return td.set("action", torch.randn(td["P"].shape[:-1] + (1,), generator=generator))
+
+    env = TransformedEnv(CountingEnv(lengths), Compose(InitTracker(), CausalWindowTransform(window)))
+    rollout = env.rollout(steps, random_policy, break_when_any_done=False)
+    online = rollout.select("observation", ("next", "observation"))
+
+    # The dataset contract: episodes concatenated into one flat, time-ordered [N] batch.
+    flat = rollout.exclude("observation", ("next", "observation")).reshape(-1)
+    offline = CausalWindowTransform(window, chunk_size=data.draw(st.integers(1, 9), label="chunk")).encode_trajectories(flat)
+    torch.testing.assert_close(offline["observation"], online["observation"].reshape(flat.numel(), -1), rtol=0, atol=0)
+    torch.testing.assert_close(
+        offline["next", "observation"], online["next", "observation"].reshape(flat.numel(), -1), rtol=0, atol=0
+    )
+    # Batched [B, T] rollouts without is_init: episodes delimited by ("next", "done") and row starts.
+    batched = CausalWindowTransform(window).encode_trajectories(rollout.exclude("is_init", "observation"))
+    torch.testing.assert_close(batched["observation"], online["observation"], rtol=0, atol=0)
+
+
+def test_forward_encodes_like_encode_trajectories_and_hides_keys():
+    env = TransformedEnv(CountingEnv([3, 4]), InitTracker())
+    rollout = env.rollout(7, counting_policy, break_when_any_done=False).reshape(-1)
+    transform = CausalWindowTransform(CAUSAL)
+    encoded = transform(rollout.clone())
+    assert not {"W", "latent"} & set(encoded.keys()) and not {"W", "latent"} & set(encoded["next"].keys())
+    for row, t in enumerate([s % 3 for s in range(7)] + [s % 4 for s in range(7)]):
+        torch.testing.assert_close(encoded["observation"][row], expected_encoding(CAUSAL, t, row // 7), rtol=0, atol=0)
+
+
+# --------------------------------------------------------------------------- specs and batched envs
+
+
+@pytest.mark.parametrize("window", [CAUSAL, NONCAUSAL, MATCHED], ids=["causal", "noncausal", "matched"])
+def test_check_env_specs_and_exact_bounds(window):
+    env = TransformedEnv(CountingEnv([2, 3, 4, 5]), CausalWindowTransform(window))
+    check_env_specs(env)
+    spec = env.observation_spec["observation"]
+    layout = env.transform.feature_layout()
+    assert spec.shape == (4, layout[-1].columns.stop) and spec.dtype == torch.float32
+    for feature in layout:
+        low, high = spec.space.low[0, feature.columns], spec.space.high[0, feature.columns]
+        if feature.variable == "P":
+            assert low.tolist() == [0.0 if feature.lag else 1.0] * 2 and high.tolist() == [1000.0] * 2
+        if feature.variable == "V":
+            assert torch.isinf(low).all() and torch.isinf(high).all()
+    assert "W" in env.observation_spec.keys() if "W" in window.lags else "W" not in env.observation_spec.keys()
+    assert "latent" not in env.observation_spec.keys()
+
+
+def test_serial_env_of_transformed_envs_and_transformed_serial_env():
+    def make():
+        return TransformedEnv(CountingEnv(3), CausalWindowTransform(CAUSAL))  # unbatched workers
+
+    inner = SerialEnv(2, make)
+    outer = TransformedEnv(SerialEnv(2, lambda: CountingEnv(3)), CausalWindowTransform(CAUSAL))
+    for env in (inner, outer):
+        check_env_specs(env)
+        rollout = env.rollout(5, counting_policy, break_when_any_done=False)
+        for i in range(2):
+            for s in range(5):
+                # every worker is env index 0 of its own CountingEnv
+                torch.testing.assert_close(rollout["observation"][i, s], expected_encoding(CAUSAL, s % 3, 0), rtol=0, atol=0)
+
+
+def make_transformed_counting_env() -> TransformedEnv:
+    return TransformedEnv(CountingEnv(3), CausalWindowTransform(CAUSAL))
+
+
+@pytest.mark.slow
+def test_parallel_env_workers_encode():
+    from torchrl.envs import ParallelEnv
+
+    env = ParallelEnv(1, make_transformed_counting_env)
+    try:
+        rollout = env.rollout(5, counting_policy, break_when_any_done=False)
+        for s in range(5):
+            torch.testing.assert_close(rollout["observation"][0, s], expected_encoding(CAUSAL, s % 3, 0), rtol=0, atol=0)
+    finally:
+        env.close()
+
+
+def test_collector_batches_carry_the_encoding():
+    from torchrl.collectors import Collector
+
+    env = TransformedEnv(CountingEnv([2, 3, 4, 5]), CausalWindowTransform(CAUSAL))
+    collector = Collector(env, counting_policy, frames_per_batch=4 * 6, total_frames=4 * 12)
+    for n_batch, batch in enumerate(collector):
+        for i, length in enumerate([2, 3, 4, 5]):
+            for s in range(6):
+                t = (6 * n_batch + s) % length
+                torch.testing.assert_close(batch["observation"][i, s], expected_encoding(CAUSAL, t, i), rtol=0, atol=0)
+    collector.shutdown()
+    assert n_batch == 1
+
+
+# --------------------------------------------------------------------------- state
+
+
+def test_state_dict_round_trip_reloads_the_same_encoding():
+    env = TransformedEnv(CountingEnv([3, 4]), CausalWindowTransform(CAUSAL))
+    env.rollout(2, counting_policy)
+    buffer = io.BytesIO()
+    torch.save(env.transform.state_dict(), buffer)
+    buffer.seek(0)
+    state = torch.load(buffer, weights_only=True)
+
+    reloaded = CausalWindowTransform.from_state_dict(state)
+    assert reloaded.window == CAUSAL and list(reloaded.window.lags) == list(CAUSAL.lags)
+    assert reloaded.feature_layout() == env.transform.feature_layout()  # shapes travel with the state
+    data = TransformedEnv(CountingEnv([3, 4]), InitTracker()).rollout(6, counting_policy, break_when_any_done=False)
+    torch.testing.assert_close(
+        reloaded.encode_trajectories(data)["observation"],
+        CausalWindowTransform(CAUSAL).encode_trajectories(data)["observation"],
+        rtol=0,
+        atol=0,
+    )
+    CausalWindowTransform(CAUSAL).load_state_dict(state)  # same window: accepted
+    with pytest.raises(ValueError, match="different adjustment window"):
+        CausalWindowTransform(MATCHED).load_state_dict(state)
+    reordered = AdjustmentWindow(k=K, action="X", lags={"V": (0, 2), "P": (0, 1, 2), "X": (1, 2)}, excluded=CAUSAL.excluded)
+    with pytest.raises(ValueError, match="different adjustment window"):
+        CausalWindowTransform(reordered).load_state_dict(state)
+    with pytest.raises(ValueError, match="out_key"):
+        CausalWindowTransform(CAUSAL, out_key="z").load_state_dict(state)
+
+
+# --------------------------------------------------------------------------- bad input
+
+
+def test_missing_key_is_named():
+    named_v = r"window variable \W+V\W+ \(key"
+    with pytest.raises(KeyError, match=named_v):
+        TransformedEnv(CountingEnv([3], drop="V"), CausalWindowTransform(CAUSAL)).observation_spec
+    data = TransformedEnv(CountingEnv([3]), InitTracker()).rollout(3, counting_policy)
+    with pytest.raises(KeyError, match=named_v):
+        CausalWindowTransform(CAUSAL).encode_trajectories(data.exclude("V"))
+    with pytest.raises(KeyError, match="is_init"):
+        CausalWindowTransform(CAUSAL).encode_trajectories(data.exclude("is_init", ("next", "done")))
+
+
+def test_shape_mismatch_is_named():
+    env = TransformedEnv(CountingEnv([3]), CausalWindowTransform(CAUSAL))
+    data = env.rollout(3, counting_policy)
+    wrong = data.exclude("observation", ("next", "observation"))
+    wrong["V"] = torch.zeros(1, 3, 3)
+    with pytest.raises(ValueError, match=r"shape mismatch for key 'V': this transform encodes events of shape \(1,\)"):
+        env.transform.encode_trajectories(wrong)
+    td = env.reset().set("action", torch.zeros(1, 2))
+    with pytest.raises(ValueError, match=r"shape mismatch for key 'action': expected \(1, 1\), got \(1, 2\)"):
+        env.step(td)
+
+
+def test_negative_window_size_is_refused():
+    with pytest.raises(ValueError, match="non-negative"):
+        AdjustmentWindow(k=-1, action="X", lags={})
+    with pytest.raises(ValueError, match="non-negative int, got -1"):
+        CausalWindowTransform.from_env(CountingEnv([3]), -1)
+
+
+def test_nan_in_an_admissible_key_is_refused_and_the_check_can_be_disabled():
+    data = TransformedEnv(CountingEnv([4]), InitTracker()).rollout(4, counting_policy)
+    data["V"][0, 2] = float("nan")
+    with pytest.raises(ValueError, match="NaN in admissible key 'V' at lag 0"):
+        CausalWindowTransform(CAUSAL).encode_trajectories(data)
+    encoded = CausalWindowTransform(CAUSAL, check_nan=False).encode_trajectories(data)
+    assert torch.isnan(encoded["observation"][0, 2]).any()
+    data["V"][0, 2] = 0.0
+    data["W"][0, 2] = float("nan")  # W is not admissible: not the policy's concern
+    CausalWindowTransform(CAUSAL).encode_trajectories(data)
+
+    class NanEnv(CountingEnv):
+        def _step(self, tensordict):
+            return super()._step(tensordict).set("P", torch.full((*self.batch_size, 2), float("nan")))
+
+    with pytest.raises(ValueError, match="NaN in admissible key 'P'"):
+        TransformedEnv(NanEnv([4]), CausalWindowTransform(CAUSAL)).rollout(3, counting_policy)

@@ -1,0 +1,11 @@
+"""TorchRL transforms that apply causal knowledge to what a policy observes.
+
+:class:`CausalWindowTransform` is the one door through which the adjustment window
+computed by :mod:`torchrl_causal.graphs` enters every pipeline (envs, collectors,
+replay buffers, offline demonstrations).
+"""
+
+from torchrl_causal.transforms._layout import FeatureSlice
+from torchrl_causal.transforms.causal_window import CausalWindowTransform
+
+__all__ = ["CausalWindowTransform", "FeatureSlice"]

@@ -1,0 +1,129 @@
+"""Where every (variable, lag) of an adjustment window lives in the encoded vector.
+
+Shared by the online (per-step ring buffer) and offline (whole-trajectory) paths of
+:class:`~torchrl_causal.transforms.CausalWindowTransform`, so both read the same columns
+of the same per-step *frame* and cannot drift apart.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import NamedTuple
+
+import torch
+from torchrl.data import Binary, Categorical, MultiCategorical, MultiOneHot, OneHot, TensorSpec, Unbounded
+from torchrl.data.tensor_specs import ContinuousBox
+
+from torchrl_causal.graphs.window import AdjustmentWindow
+
+__all__ = ["FeatureSlice", "WindowLayout", "spec_bounds"]
+
+
+class FeatureSlice(NamedTuple):
+    """One block of the encoding: ``variable`` at ``lag`` steps back occupies ``columns``."""
+
+    variable: str
+    lag: int
+    columns: slice
+
+
+class WindowLayout:
+    """Column bookkeeping for one window and one set of variable shapes.
+
+    A *frame* is everything recorded about one time step, flattened: the admissible state
+    variables (window order) then the action, ``frame_width`` columns in all. The
+    encoding picks, for each feature column, one frame column at one lag.
+
+    Args:
+        window: the adjustment window.
+        shapes: event shape (without batch dimensions) of every variable in
+            ``window.lags``.
+    """
+
+    def __init__(self, window: AdjustmentWindow, shapes: Mapping[str, tuple[int, ...]]) -> None:
+        self.window = window
+        self.shapes = {var: tuple(int(s) for s in shapes[var]) for var in window.lags if window.lags[var]}
+        widths = {var: math.prod(shape) for var, shape in self.shapes.items()}
+        framed = [var for var in self.shapes if var != window.action]
+        self.state_variables: tuple[str, ...] = tuple(framed)
+        self.has_action = window.action in self.shapes
+        if self.has_action:
+            framed.append(window.action)
+        self.widths = widths
+        self.frame_offsets: dict[str, int] = {}
+        offset = 0
+        for var in framed:
+            self.frame_offsets[var] = offset
+            offset += widths[var]
+        self.frame_width = offset
+        self.state_width = offset - (widths[window.action] if self.has_action else 0)
+
+        self.features: list[FeatureSlice] = []
+        lags: list[torch.Tensor] = []
+        columns: list[torch.Tensor] = []
+        start = 0
+        for var in self.shapes:
+            for lag in window.lags[var]:
+                width = widths[var]
+                self.features.append(FeatureSlice(var, lag, slice(start, start + width)))
+                lags.append(torch.full((width,), lag, dtype=torch.long))
+                first = self.frame_offsets[var]
+                columns.append(torch.arange(first, first + width))
+                start += width
+        self.num_features = start
+        self.feature_lag = torch.cat(lags) if lags else torch.zeros(0, dtype=torch.long)
+        self.feature_column = torch.cat(columns) if columns else torch.zeros(0, dtype=torch.long)
+
+    @property
+    def num_slots(self) -> int:
+        """Frames the online ring buffer keeps: the current step and ``k`` past ones."""
+        return self.window.k + 1
+
+    def ring_index(self) -> torch.Tensor:
+        """``[k + 1, num_features]`` flat indices into a ``[k + 1, frame_width]`` ring.
+
+        Row ``p`` serves the ring whose current frame sits in slot ``p``; the frame
+        ``lag`` steps back then sits in slot ``(p - lag) mod (k + 1)``.
+        """
+        current = torch.arange(self.num_slots).unsqueeze(-1)
+        slot = (current - self.feature_lag).remainder(self.num_slots)
+        return slot * self.frame_width + self.feature_column
+
+    def bounds(self, variable_bounds: Mapping[str, tuple[torch.Tensor, torch.Tensor]]) -> tuple[torch.Tensor, torch.Tensor]:
+        """Per-feature ``(low, high)`` (trailing dimension ``num_features``).
+
+        ``variable_bounds[var]`` holds flattened bounds ``[..., width]`` (leading batch
+        dimensions allowed). Features at lag >= 1 are zero before an episode has lasted
+        that long (Algorithm 2's zero-padding), so their bounds are widened to hold 0.
+        """
+        lows, highs = [], []
+        for feature in self.features:
+            low, high = variable_bounds[feature.variable]
+            if feature.lag > 0:
+                low, high = low.clamp(max=0), high.clamp(min=0)
+            lows.append(low)
+            highs.append(high)
+        return torch.cat(lows, -1), torch.cat(highs, -1)
+
+
+def spec_bounds(spec: TensorSpec, batch_ndim: int, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """Flattened ``(low, high)`` of a leaf spec as ``dtype`` (shape ``batch + (width,)``).
+
+    Returns ``None`` for unbounded specs. Discrete specs give their integer range.
+    """
+    if isinstance(spec, Unbounded):
+        return None
+    shape, device = spec.shape, spec.device
+    if isinstance(spec, (OneHot, MultiOneHot, Binary)):
+        low, high = torch.zeros(shape, device=device), torch.ones(shape, device=device)
+    elif isinstance(spec, MultiCategorical):
+        low, high = torch.zeros(shape, device=device), (spec.nvec - 1).expand(shape)
+    elif isinstance(spec, Categorical):
+        low, high = torch.zeros(shape, device=device), torch.full(shape, spec.space.n - 1, device=device)
+    elif isinstance(spec.space, ContinuousBox):
+        low, high = spec.space.low.expand(shape), spec.space.high.expand(shape)
+    else:
+        raise TypeError(f"cannot derive bounds from a {type(spec).__name__} spec")
+    batch = shape[:batch_ndim]
+    return low.to(dtype).reshape(*batch, -1), high.to(dtype).reshape(*batch, -1)

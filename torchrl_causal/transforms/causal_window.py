@@ -1,0 +1,496 @@
+"""The causal adjustment window of Algorithm 2 as a TorchRL transform."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase, unravel_key
+from tensordict.utils import NestedKey
+from torchrl.data import Bounded, Composite, TensorSpec, Unbounded
+from torchrl.envs import EnvBase, Transform
+from torchrl.envs.transforms.utils import _get_reset
+
+from torchrl_causal.graphs.window import AdjustmentWindow
+from torchrl_causal.transforms._layout import FeatureSlice, WindowLayout, spec_bounds
+
+__all__ = ["CausalWindowTransform"]
+
+LATENT_KEY = "latent"
+
+
+class CausalWindowTransform(Transform):
+    """Writes the windowed causal adjustment set of each step into one observation vector.
+
+    This is the ``Encode(s, t)`` of the paper's Algorithms 2 and 3: at every reset and
+    step, the values of every admissible variable of ``window`` at every lag the window
+    names are concatenated into ``out_key``; lags that reach before the episode's first
+    step are zero-padded. Everything the imitator must not condition on is removed from
+    what the policy sees: the window's ``excluded`` observed keys (e.g. the compass
+    ``"W"``) and the whole ``"latent"`` sub-tensordict. Admissible raw keys stay.
+
+    **Keys.** An admissible state variable ``v`` is the root key ``v``. The window's
+    action variable is read from ``action_key``; its lags (always >= 1) come from the
+    actions the transform has seen taken in the current episode.
+
+    **Encoding order.** Variables in ``window.lags`` order (the template's order, the
+    action last), and within a variable by increasing lag, lag 0 (the current step)
+    first; each ``(variable, lag)`` block holds the variable's values flattened.
+    :meth:`feature_layout` names the columns of every block.
+
+    **State.** One ring buffer of the last ``k + 1`` frames per environment of the
+    (arbitrarily shaped) batch, zeroed when an environment is reset; a partial reset
+    (``"_reset"`` mask) clears only the environments it names. The window itself, the
+    keys and the variable shapes are saved in the module's state dict
+    (:meth:`get_extra_state`), so a reloaded transform encodes identically, and loading
+    the state of a different window raises.
+
+    **Offline.** :meth:`encode_trajectories` (also the transform's :meth:`forward`, so
+    it can serve as a replay-buffer or dataset transform) encodes stored, time-ordered
+    demonstrations and gives exactly the tensors the transform produces online.
+
+    Args:
+        window: the adjustment window to apply.
+
+    Keyword Args:
+        out_key: where the encoding is written. Defaults to ``"observation"``.
+        action_key: the env key of the window's action variable. Defaults to
+            ``"action"``.
+        check_nan: raise, naming the variable, when the encoding contains a NaN (one
+            reduction per step). Defaults to ``True``.
+        chunk_size: rows encoded at once by :meth:`encode_trajectories`, bounding its
+            temporary memory. Defaults to ``8192``.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl_causal.graphs import AdjustmentWindow
+        >>> window = AdjustmentWindow(k=1, action="X", lags={"P": (0, 1), "X": (1,)},
+        ...                           excluded=frozenset({"W"}), observed=("P", "W", "X"))
+        >>> transform = CausalWindowTransform(window)
+        >>> [(f.variable, f.lag, f.columns) for f in transform.feature_layout({"P": (1,), "X": (1,)})]
+        [('P', 0, slice(0, 1, None)), ('P', 1, slice(1, 2, None)), ('X', 1, slice(2, 3, None))]
+        >>> episode = TensorDict(  # one 3-step episode: P_t = t + 1, X_t = 10 (t + 1)
+        ...     {"P": torch.tensor([[1.0], [2.0], [3.0]]), "W": torch.zeros(3, 1),
+        ...      "action": torch.tensor([[10.0], [20.0], [30.0]]),
+        ...      "is_init": torch.tensor([[True], [False], [False]]),
+        ...      "next": {"P": torch.tensor([[2.0], [3.0], [4.0]]), "W": torch.zeros(3, 1)}},
+        ...     batch_size=[3])
+        >>> encoded = transform.encode_trajectories(episode)
+        >>> encoded["observation"]  # [P_t, P_{t-1}, X_{t-1}], zero before the first step
+        tensor([[ 1.,  0.,  0.],
+                [ 2.,  1., 10.],
+                [ 3.,  2., 20.]])
+        >>> encoded["next", "observation"][-1]
+        tensor([ 4.,  3., 30.])
+        >>> "W" in encoded.keys()
+        False
+
+    In an environment (see :meth:`from_env`)::
+
+        >>> env = TransformedEnv(base_env, CausalWindowTransform.from_env(base_env, k=10))  # doctest: +SKIP
+    """
+
+    def __init__(
+        self,
+        window: AdjustmentWindow,
+        *,
+        out_key: NestedKey = "observation",
+        action_key: NestedKey = "action",
+        check_nan: bool = True,
+        chunk_size: int = 8192,
+    ) -> None:
+        if not isinstance(window, AdjustmentWindow):
+            raise TypeError(f"window must be an AdjustmentWindow, got {type(window).__name__}")
+        if window.observed:
+            unobserved = [var for var in window.lags if var not in window.observed]
+            if unobserved:
+                raise ValueError(f"window variables {unobserved} are not observed by the imitator {window.observed}")
+        out_key = unravel_key(out_key)
+        if out_key in window.lags or out_key == LATENT_KEY or out_key in window.excluded:
+            raise ValueError(f"out_key {out_key!r} would overwrite a variable of the window")
+        if chunk_size < 1:
+            raise ValueError(f"chunk_size must be positive, got {chunk_size}")
+        state_keys = [var for var, lags in window.lags.items() if lags and var != window.action]
+        super().__init__(in_keys=state_keys, out_keys=[out_key])
+        self.window = window
+        self.out_key = out_key
+        self.action_key = unravel_key(action_key)
+        self.check_nan = check_nan
+        self.chunk_size = chunk_size
+        self.hidden_keys: tuple[NestedKey, ...] = (LATENT_KEY, *sorted(window.excluded))
+        self._layout: WindowLayout | None = None
+        self._dtype: torch.dtype | None = None
+        self._ring_index: torch.Tensor | None = None
+        self._history: torch.Tensor | None = None
+        self._slot = 0
+
+    # ------------------------------------------------------------------ construction
+
+    @classmethod
+    def from_env(
+        cls,
+        env: EnvBase,
+        k: int,
+        *,
+        causal: bool = True,
+        mode: str = "relaxed",
+        window_matched: bool = False,
+        **kwargs: Any,
+    ) -> CausalWindowTransform:
+        """Builds the transform from ``env.causal_template``.
+
+        Args:
+            env: an env exposing ``causal_template`` (a
+                :class:`~torchrl_causal.graphs.TimeSliceTemplate`).
+            k: window size.
+            causal: ``True`` applies :func:`~torchrl_causal.graphs.windowed_adjustment`
+                (``mode`` as given); ``False`` gives a non-causal baseline that keeps
+                every observed variable, W included.
+            mode: ``"exact"`` or ``"relaxed"`` (causal windows only).
+            window_matched: with ``causal=False``, stack every observed variable over the
+                same lags a causal window of size ``k`` uses; otherwise the baseline is the
+                paper's ``V^O_t`` (observed state at lag 0 and the previous action) and
+                ``k`` only gets validated.
+            **kwargs: forwarded to the constructor.
+        """
+        if isinstance(k, bool) or not isinstance(k, int) or k < 0:
+            raise ValueError(f"window size k must be a non-negative int, got {k!r}")
+        template = getattr(env, "causal_template", None)
+        if template is None:
+            raise AttributeError(f"{type(env).__name__} exposes no causal_template to build a window from")
+        from torchrl_causal.graphs import observation_window, windowed_adjustment
+
+        if causal:
+            if window_matched:
+                raise ValueError("window_matched=True only applies to the non-causal baseline (causal=False)")
+            window = windowed_adjustment(template, k, mode=mode)
+        else:
+            window = observation_window(template, k if window_matched else None)
+        return cls(window, **kwargs)
+
+    @classmethod
+    def from_state_dict(cls, state_dict: Mapping[str, Any], prefix: str = "", **kwargs: Any) -> CausalWindowTransform:
+        """Rebuilds a transform from a :meth:`state_dict` (e.g. a loaded checkpoint)."""
+        try:
+            state = state_dict[prefix + "_extra_state"]
+        except KeyError:
+            raise KeyError(f"no CausalWindowTransform state under {prefix + '_extra_state'!r}") from None
+        transform = cls(
+            AdjustmentWindow.from_dict(state["window"]),
+            out_key=state["out_key"],
+            action_key=state["action_key"],
+            **kwargs,
+        )
+        transform.set_extra_state(state)
+        return transform
+
+    # ------------------------------------------------------------------ layout
+
+    def feature_layout(self, shapes: Mapping[str, Sequence[int]] | None = None) -> list[FeatureSlice]:
+        """The ``(variable, lag, columns)`` block of every part of the encoding, in order.
+
+        Args:
+            shapes: event shape of each window variable; defaults to the shapes learnt
+                from the env's specs, the data or a loaded state dict.
+        """
+        if shapes is not None:
+            return WindowLayout(self.window, {var: tuple(s) for var, s in shapes.items()}).features
+        return self._require_layout().features
+
+    def _require_layout(self) -> WindowLayout:
+        if self._layout is None:
+            if self.parent is None:
+                raise RuntimeError(
+                    "the variable shapes are unknown: attach the transform to an env, encode data "
+                    "first, or pass shapes explicitly"
+                )
+            self._leaf_specs(self.parent.full_observation_spec, self.parent.full_action_spec)
+        return self._layout
+
+    def _set_layout(self, shapes: Mapping[str, tuple[int, ...]], dtype: torch.dtype | None) -> WindowLayout:
+        if self._layout is not None:
+            for var, known in self._layout.shapes.items():
+                if shapes[var] != known:
+                    raise ValueError(
+                        f"shape mismatch for key {self._variable_key(var)!r}: this transform encodes "
+                        f"events of shape {known}, got {shapes[var]}"
+                    )
+        if self._layout is None:
+            self._layout = WindowLayout(self.window, shapes)
+            self._ring_index = self._layout.ring_index()
+            self._history = None
+        if dtype is not None:
+            self._dtype = dtype
+        return self._layout
+
+    def _variable_key(self, var: str) -> NestedKey:
+        return self.action_key if var == self.window.action else var
+
+    def _leaf_specs(self, observation_spec: Composite, action_spec: Composite) -> dict[str, TensorSpec]:
+        """The spec of every encoded variable, validated; records the layout."""
+        leaves: dict[str, TensorSpec] = {}
+        for var, lags in self.window.lags.items():
+            if not lags:
+                continue
+            key = self._variable_key(var)
+            container, name = (action_spec, "action") if var == self.window.action else (observation_spec, "observation")
+            if key not in container.keys(True, True):
+                raise KeyError(
+                    f"window variable {var!r} (key {key!r}) is missing from the env's {name} spec; "
+                    f"available keys: {sorted(map(str, container.keys(True, True)))}"
+                )
+            leaves[var] = container[key]
+        batch_ndim = observation_spec.ndim
+        shapes = {var: tuple(spec.shape[batch_ndim:]) for var, spec in leaves.items()}
+        self._set_layout(shapes, _encoding_dtype(spec.dtype for spec in leaves.values()))
+        return leaves
+
+    # ------------------------------------------------------------------ specs
+
+    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        leaves = self._leaf_specs(observation_spec, self.parent.full_action_spec)
+        layout, dtype = self._layout, self._dtype
+        batch = observation_spec.shape
+        shape = (*batch, layout.num_features)
+        bounds = {var: spec_bounds(spec, len(batch), dtype) for var, spec in leaves.items()}
+        if all(b is None for b in bounds.values()):
+            encoding_spec = Unbounded(shape=shape, dtype=dtype, device=observation_spec.device)
+        else:
+            for var, b in bounds.items():
+                if b is None:
+                    infinite = torch.full((*batch, layout.widths[var]), torch.inf, dtype=dtype)
+                    bounds[var] = (-infinite, infinite)
+            low, high = layout.bounds(bounds)
+            encoding_spec = Bounded(low=low, high=high, shape=shape, dtype=dtype, device=observation_spec.device)
+        for key in self.hidden_keys:
+            if key in observation_spec.keys():
+                del observation_spec[key]
+        observation_spec[self.out_key] = encoding_spec
+        return observation_spec
+
+    # ------------------------------------------------------------------ online
+
+    @property
+    def reset_key(self) -> NestedKey:
+        reset_keys = self.parent.reset_keys
+        if len(reset_keys) != 1:
+            raise RuntimeError(f"{type(self).__name__} supports envs with one reset key, got {reset_keys}")
+        return reset_keys[0]
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
+        layout = self._require_layout()
+        batch = tensordict_reset.batch_size
+        states = self._read_states(tensordict_reset, batch, layout)
+        reset = _get_reset(self.reset_key, tensordict)
+        history = self._history
+        if history is None or history.shape[:-2] != batch or bool(reset.all()):
+            history = self._history = states.new_zeros((*batch, layout.num_slots, layout.frame_width))
+            self._slot = 0
+            history[..., 0, : layout.state_width] = states
+        else:
+            history[reset] = 0
+            history[reset, self._slot, : layout.state_width] = states[reset]
+        tensordict_reset.set(self.out_key, self._encode_ring(history))
+        return tensordict_reset.exclude(*self.hidden_keys, inplace=True)
+
+    def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
+        history = self._history
+        if history is None:
+            raise RuntimeError(f"{type(self).__name__}: reset the env before stepping it")
+        layout = self._layout
+        batch = next_tensordict.batch_size
+        if layout.has_action:
+            action = tensordict.get(self.action_key, None)
+            if action is None:
+                raise KeyError(f"the action key {self.action_key!r} is missing from the step's input")
+            try:
+                history[..., self._slot, layout.state_width :] = action.reshape(*batch, -1)
+            except RuntimeError:
+                self._raise_shape_error(tensordict, batch, (self.window.action,))
+        self._slot = (self._slot + 1) % layout.num_slots
+        history[..., self._slot, : layout.state_width] = self._read_states(next_tensordict, batch, layout)
+        next_tensordict.set(self.out_key, self._encode_ring(history))
+        return next_tensordict.exclude(*self.hidden_keys, inplace=True)
+
+    def _encode_ring(self, history: torch.Tensor) -> torch.Tensor:
+        encoding = history.flatten(-2).index_select(-1, self._ring_index[self._slot])
+        self._check_nan(encoding)
+        return encoding
+
+    def _read_states(self, tensordict: TensorDictBase, batch: torch.Size, layout: WindowLayout) -> torch.Tensor:
+        """``[*batch, state_width]``: the admissible state variables of one step, flattened."""
+        try:
+            values = [tensordict.get(var).reshape(*batch, -1) for var in layout.state_variables]
+            states = torch.cat(values, -1) if len(values) != 1 else values[0]
+            if states.shape[-1] != layout.state_width:
+                raise RuntimeError
+        except KeyError:
+            missing = [var for var in layout.state_variables if var not in tensordict.keys()]
+            raise KeyError(f"admissible keys {missing} are missing from the env's output") from None
+        except RuntimeError:
+            self._raise_shape_error(tensordict, batch, layout.state_variables)
+        return states.to(self._dtype)
+
+    def _raise_shape_error(self, tensordict: TensorDictBase, batch: torch.Size, variables: Sequence[str]) -> None:
+        for var in variables:
+            key = self._variable_key(var)
+            expected = (*batch, *self._layout.shapes[var])
+            got = tuple(tensordict.get(key).shape)
+            if got != expected:
+                raise ValueError(f"shape mismatch for key {key!r}: expected {expected}, got {got}")
+        raise RuntimeError(f"could not encode {list(variables)} from {tensordict}")
+
+    def _check_nan(self, encoding: torch.Tensor) -> None:
+        if not self.check_nan or not bool(torch.isnan(encoding).any()):
+            return
+        column = int(torch.isnan(encoding).reshape(-1, encoding.shape[-1]).any(0).nonzero()[0])
+        feature = next(f for f in self._layout.features if f.columns.start <= column < f.columns.stop)
+        raise ValueError(
+            f"NaN in admissible key {self._variable_key(feature.variable)!r} at lag {feature.lag}; "
+            "refusing to feed it to the policy (check_nan=False disables this check)"
+        )
+
+    # ------------------------------------------------------------------ offline
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """Encodes stored trajectories: see :meth:`encode_trajectories`."""
+        return self.encode_trajectories(tensordict)
+
+    def encode_trajectories(self, trajectories: TensorDictBase) -> TensorDictBase:
+        """Encodes stored, time-ordered transitions exactly as the online transform would.
+
+        Args:
+            trajectories: a TensorDict of shape ``[N]`` (episodes concatenated in time
+                order, the dataset contract) or ``[*B, T]`` (time last, e.g. a batched
+                rollout; each row's first step starts an episode). It needs the
+                admissible keys and ``action_key`` at the root, the admissible keys under
+                ``"next"``, and either ``"is_init"`` (True at each episode's first step,
+                TorchRL's ``InitTracker`` convention) or ``("next", "done")``.
+
+        Returns:
+            A new TensorDict with ``out_key`` and ``("next", out_key)`` written and the
+            hidden keys (``excluded`` and ``"latent"``) removed at both levels. Step
+            ``t`` of an episode reads rows ``t - lag`` of the same episode (zero before
+            its start), gathered for all rows at once in chunks of ``chunk_size``.
+        """
+        if trajectories.batch_dims == 0:
+            raise ValueError("encode_trajectories needs a time dimension, got a TensorDict with batch_size=[]")
+        shape = trajectories.batch_size
+        flat = trajectories.reshape(-1)
+        layout = self._layout_from_data(flat)
+        steps = self._episode_steps(flat, shape[-1] if len(shape) > 1 else None)
+        frames = self._padded_frames(flat, layout)
+        next_states = self._read_states(flat.get("next"), flat.batch_size, layout)
+
+        k = self.window.k
+        lag, column = layout.feature_lag, layout.feature_column
+        current = (lag == 0).nonzero().squeeze(-1)
+        current_columns = column[current]
+        position, next_position = k - lag, (k + 1 - lag).clamp(max=k)
+        n, zero = flat.numel(), frames.new_zeros(())
+        encoding = frames.new_empty((n, layout.num_features))
+        next_encoding = frames.new_empty((n, layout.num_features))
+        for start in range(0, n, self.chunk_size):
+            stop = min(start + self.chunk_size, n)
+            # windows[i, :, m] is the frame of row start + i - k + m (rows before 0 are zero)
+            windows = frames[start : stop + k].unfold(0, k + 1, 1)
+            step = steps[start:stop, None]
+            torch.where(step >= lag, windows[:, column, position], zero, out=encoding[start:stop])
+            # at t + 1 the frame `lag` steps back is row i - lag + 1; lag 0 is the next state
+            torch.where(step >= lag - 1, windows[:, column, next_position], zero, out=next_encoding[start:stop])
+            next_encoding[start:stop, current] = next_states[start:stop, current_columns]
+            self._check_nan(encoding[start:stop])
+            self._check_nan(next_encoding[start:stop])
+
+        hidden = [*self.hidden_keys, *(("next", key) for key in self.hidden_keys)]
+        out = trajectories.exclude(*hidden)
+        out.set(self.out_key, encoding.reshape(*shape, -1))
+        out.set(("next", self.out_key), next_encoding.reshape(*shape, -1))
+        return out
+
+    def _layout_from_data(self, flat: TensorDictBase) -> WindowLayout:
+        leaves = {}
+        for var, lags in self.window.lags.items():
+            if not lags:
+                continue
+            key = self._variable_key(var)
+            value = flat.get(key, None)
+            if value is None:
+                raise KeyError(f"window variable {var!r} (key {key!r}) is missing from the trajectories")
+            leaves[var] = value
+        shapes = {var: tuple(value.shape[1:]) for var, value in leaves.items()}
+        dtype = self._dtype or _encoding_dtype(value.dtype for value in leaves.values())
+        return self._set_layout(shapes, dtype)
+
+    def _episode_steps(self, flat: TensorDictBase, row_length: int | None) -> torch.Tensor:
+        """``[N]`` index of each row within its episode."""
+        n = flat.numel()
+        is_init = flat.get("is_init", None)
+        if is_init is not None:
+            starts = is_init.reshape(n, -1).any(-1)
+        else:
+            done = flat.get(("next", "done"), None)
+            if done is None:
+                raise KeyError("trajectories need 'is_init' or ('next', 'done') to delimit episodes")
+            starts = torch.cat([done.new_ones(1), done.reshape(n, -1).any(-1)[:-1]])
+        index = torch.arange(n, device=starts.device)
+        if row_length is not None:
+            starts = starts | (index % row_length == 0)
+        starts[0] = True
+        return index - torch.cummax(torch.where(starts, index, 0), 0).values
+
+    def _padded_frames(self, flat: TensorDictBase, layout: WindowLayout) -> torch.Tensor:
+        """``[k + N, frame_width]``: every row's frame after ``k`` zero rows."""
+        k, n = self.window.k, flat.numel()
+        states = self._read_states(flat, flat.batch_size, layout)
+        frames = states.new_zeros((k + n, layout.frame_width))
+        frames[k:, : layout.state_width] = states
+        if layout.has_action:
+            action = flat.get(self.action_key)
+            try:
+                frames[k:, layout.state_width :] = action.reshape(n, -1)
+            except RuntimeError:
+                self._raise_shape_error(flat, flat.batch_size, (self.window.action,))
+        return frames
+
+    # ------------------------------------------------------------------ serialisation
+
+    def get_extra_state(self) -> dict[str, Any]:
+        return {
+            "window": self.window.to_dict(),
+            "out_key": self.out_key,
+            "action_key": self.action_key,
+            "shapes": None if self._layout is None else {var: list(s) for var, s in self._layout.shapes.items()},
+        }
+
+    def set_extra_state(self, state: Mapping[str, Any]) -> None:
+        saved = state["window"]
+        mine = self.window.to_dict()
+        differing = sorted(field for field in mine if mine[field] != saved.get(field))
+        if differing or list(saved["lags"]) != list(mine["lags"]):
+            raise ValueError(
+                f"the saved state encodes a different adjustment window (fields {differing or ['lags order']} "
+                f"differ): saved {saved}, this transform {mine}; rebuild it with "
+                "CausalWindowTransform.from_state_dict"
+            )
+        for name in ("out_key", "action_key"):
+            if unravel_key(state[name]) != getattr(self, name):
+                raise ValueError(f"the saved state has {name}={state[name]!r}, this transform {getattr(self, name)!r}")
+        if state.get("shapes") is not None:
+            self._set_layout({var: tuple(s) for var, s in state["shapes"].items()}, None)
+
+    def __repr__(self) -> str:
+        lags = ", ".join(f"{var}@{list(lags)}" for var, lags in self.window.lags.items())
+        return f"{type(self).__name__}(k={self.window.k}, lags=[{lags}], hidden={list(self.hidden_keys)}, out_key={self.out_key!r})"
+
+
+def _encoding_dtype(dtypes) -> torch.dtype:
+    """The common dtype of the encoded variables, floating point (actions may be integers)."""
+    result = None
+    for dtype in dtypes:
+        result = dtype if result is None else torch.promote_types(result, dtype)
+    if result is None or not result.is_floating_point:
+        return torch.get_default_dtype()
+    return result
