@@ -103,11 +103,14 @@ def rover_dynamics(
     The comments name the template edge (``src at lag -> dst``) each line makes true.
 
     Examples:
-        >>> layout = MazeLayout.from_name("u")
-        >>> p, a, v = rover_dynamics(torch.tensor([[-1.0, 1.0]]), torch.zeros(1, 1), torch.zeros(1, 1),
-        ...                          torch.tensor([[1.0, 0.0]]), torch.zeros(1, 2), layout, RoverParameters())
-        >>> p.tolist(), v.tolist()  # half of full speed reached in one step, eastwards
-        ([[-0.9800000190734375, 1.0]], [[0.019999999552965164]])
+        >>> layout, params = MazeLayout.from_name("u"), RoverParameters()
+        >>> start = torch.tensor([[-1.0, 1.0]])
+        >>> p, a, v = rover_dynamics(start, torch.zeros(1, 1), torch.zeros(1, 1),
+        ...                          torch.tensor([[1.0, 0.0]]), torch.zeros(1, 2), layout, params)
+        >>> round(v.item() / params.max_speed, 6)  # half of full speed reached in one step
+        0.5
+        >>> torch.allclose(p - start, torch.tensor([[v.item(), 0.0]]))  # eastwards, as it faces
+        True
     """
     throttle, turn = action.clamp(-1.0, 1.0).split(1, dim=-1)
     # O_{t-1} -> O_t and X_{t-1} -> O_t: the heading persists and turns with the action.

@@ -1,0 +1,273 @@
+"""Expert demonstrations on disk: collection, atomic memory-mapped storage, verified loading.
+
+A dataset is a directory holding
+
+* ``data/``: a memory-mapped TensorDict (:meth:`tensordict.TensorDict.memmap`) of shape
+  ``[N]``: the time-ordered transitions of every episode, concatenated, with every env key
+  (latent and ``scm`` ones included), a ``"next"`` sub-TensorDict as TorchRL rollouts
+  produce, ``"is_init"`` (bool ``[N, 1]``, True at each episode's first step) and
+  ``"episode"`` (int64 ``[N]``);
+* ``metadata.json``: the format version, the env config (class, maze, horizon, strength,
+  regime...), the seed, the number of episodes and transitions, the expert's success rate
+  and mean episode length, a manifest (shape and dtype of every key) and a SHA-256
+  checksum over the data and the rest of the metadata.
+
+Collection writes into a hidden temporary directory next to ``path`` and renames it into
+place only once complete, so an interrupted collection leaves nothing at ``path``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from tensordict.utils import NestedKey
+from torchrl.envs import EnvBase
+from tqdm.auto import tqdm
+
+__all__ = [
+    "FORMAT_VERSION",
+    "DatasetError",
+    "collect_demonstrations",
+    "load_demonstrations",
+    "read_metadata",
+]
+
+FORMAT_VERSION = 1
+_DATA_DIR = "data"
+_METADATA_FILE = "metadata.json"
+
+
+class DatasetError(ValueError):
+    """A demonstration dataset is missing, corrupted or not the one that was expected."""
+
+
+def _key_name(key: NestedKey) -> str:
+    return ".".join(key) if isinstance(key, tuple) else key
+
+
+def _leaves(data: TensorDictBase) -> list[tuple[str, torch.Tensor]]:
+    return sorted((_key_name(key), data.get(key)) for key in data.keys(include_nested=True, leaves_only=True))
+
+
+def _manifest(data: TensorDictBase) -> dict[str, dict[str, Any]]:
+    return {name: {"shape": list(value.shape), "dtype": str(value.dtype)} for name, value in _leaves(data)}
+
+
+def _checksum(data: TensorDictBase, metadata: Mapping[str, Any]) -> str:
+    digest = hashlib.sha256()
+    digest.update(json.dumps({k: v for k, v in metadata.items() if k != "checksum"}, sort_keys=True).encode())
+    for name, value in _leaves(data):
+        digest.update(name.encode())
+        digest.update(value.detach().cpu().contiguous().view(torch.uint8).numpy().tobytes())
+    return digest.hexdigest()
+
+
+def _env_config(env: EnvBase) -> dict[str, Any]:
+    config = getattr(env, "config", None)
+    if callable(config):
+        return config()
+    return {"class": f"{type(env).__module__}.{type(env).__qualname__}", "batch_size": list(env.batch_size)}
+
+
+@torch.no_grad()
+def _rollout_episodes(
+    env: EnvBase, policy: Callable[[TensorDictBase], TensorDictBase], episodes: int, progress: bool
+) -> list[TensorDictBase]:
+    """Steps ``env`` (auto-resetting finished sub-envs) until ``episodes`` episodes completed.
+
+    Returns the completed episodes, each a ``[T]`` TensorDict, in order of completion
+    (ties broken by batch index); episodes still running at the end are dropped so that
+    no truncated-by-collection episode enters the dataset.
+    """
+    if env.batch_size == ():
+        raise ValueError("collect_demonstrations needs a batched env (batch_size (B,) or larger)")
+    n_envs = env.batch_size.numel()
+    steps: list[TensorDictBase] = []
+    finished: list[tuple[int, int, int]] = []  # (end step, env index, start step)
+    starts = torch.zeros(n_envs, dtype=torch.long)
+    td = env.reset()
+    with tqdm(total=episodes, desc="demonstrations", unit="episode", disable=not progress) as bar:
+        while len(finished) < episodes:
+            td = policy(td)
+            transition, td = env.step_and_maybe_reset(td)
+            steps.append(transition.reshape(-1))
+            t = len(steps) - 1
+            done = transition.get(("next", "done")).reshape(n_envs)
+            for index in done.nonzero().flatten().tolist():
+                finished.append((t, index, int(starts[index])))
+                starts[index] = t + 1
+            bar.update(min(int(done.sum()), episodes - bar.n))
+    trajectories = torch.stack(steps, dim=1)  # [n_envs, T]
+    return [trajectories[index, start : end + 1] for end, index, start in sorted(finished)[:episodes]]
+
+
+def _flatten(episodes: list[TensorDictBase]) -> TensorDictBase:
+    data = torch.cat([episode.to_tensordict() for episode in episodes], dim=0)
+    lengths = torch.tensor([episode.shape[0] for episode in episodes])
+    is_init = torch.zeros(data.shape[0], 1, dtype=torch.bool)
+    is_init[torch.cumsum(lengths, 0) - lengths] = True
+    data.set("is_init", is_init)
+    data.set("episode", torch.repeat_interleave(torch.arange(len(episodes)), lengths))
+    return data
+
+
+def collect_demonstrations(
+    env: EnvBase,
+    policy: Callable[[TensorDictBase], TensorDictBase],
+    episodes: int,
+    path: str | os.PathLike,
+    *,
+    seed: int | None = None,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> TensorDictBase:
+    """Rolls ``policy`` out in ``env`` for ``episodes`` complete episodes and stores them at ``path``.
+
+    Args:
+        env: a batched env (its sub-envs run episodes in parallel and auto-reset).
+        policy: a TensorDict policy (e.g. :class:`~torchrl_causal.envs.RoverExpert`).
+        episodes: number of complete episodes to store.
+        path: dataset directory to create.
+        seed: seeds ``env`` before collecting (recorded in the metadata).
+        overwrite: replace an existing dataset at ``path`` (else a :class:`FileExistsError`).
+        progress: show a tqdm progress bar.
+
+    Returns:
+        The stored dataset, memory-mapped from ``path`` (as :func:`load_demonstrations` gives).
+
+    Examples:
+        >>> import tempfile
+        >>> from torchrl_causal.envs import RoverExpert, RoverMazeEnv
+        >>> env = RoverMazeEnv(maze="u", batch_size=(8,))
+        >>> path = Path(tempfile.mkdtemp()) / "u_demos"
+        >>> data = collect_demonstrations(env, RoverExpert(env), 8, path, seed=0, progress=False)
+        >>> int(data["is_init"].sum()), read_metadata(path)["expert_success_rate"]
+        (8, 1.0)
+        >>> load_demonstrations(path, expected={"env": {"maze": "u"}, "regime": "train"}).shape == data.shape
+        True
+    """
+    if not isinstance(episodes, int) or episodes < 1:
+        raise ValueError(f"episodes must be a positive int, got {episodes!r}")
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"a dataset already exists at {path} (pass overwrite=True to replace it)")
+    if seed is not None:
+        env.set_seed(seed)
+    data = _flatten(_rollout_episodes(env, policy, episodes, progress))
+    last_steps = data.get(("next", "done")).squeeze(-1)
+    success = data.get(("next", "success"))[last_steps] if ("next", "success") in data.keys(True) else None
+    metadata: dict[str, Any] = {
+        "format_version": FORMAT_VERSION,
+        "env": _env_config(env),
+        "regime": getattr(env, "regime", None),
+        "seed": seed,
+        "policy": f"{type(policy).__module__}.{type(policy).__qualname__}",
+        "episodes": episodes,
+        "transitions": data.shape[0],
+        "expert_success_rate": None if success is None else success.float().mean().item(),
+        "mean_episode_length": data.shape[0] / episodes,
+        "manifest": _manifest(data),
+    }
+    metadata["checksum"] = _checksum(data, metadata)
+    _write_atomically(data, metadata, path, overwrite)
+    return load_demonstrations(path)
+
+
+def _write_atomically(data: TensorDictBase, metadata: Mapping[str, Any], path: Path, overwrite: bool) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    try:
+        data.memmap(staging / _DATA_DIR)
+        (staging / _METADATA_FILE).write_text(json.dumps(metadata, indent=2, sort_keys=True))
+        if overwrite and path.exists():
+            # Move the old dataset aside first: a rename cannot replace a non-empty directory.
+            retired = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
+            os.replace(path, retired / path.name)
+            os.replace(staging, path)
+            shutil.rmtree(retired, ignore_errors=True)
+        else:
+            os.replace(staging, path)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def read_metadata(path: str | os.PathLike) -> dict[str, Any]:
+    """The metadata of the dataset at ``path`` (not verified; :func:`load_demonstrations` verifies)."""
+    file = Path(path) / _METADATA_FILE
+    if not file.is_file():
+        raise DatasetError(f"{path} is not a demonstration dataset: {_METADATA_FILE} is missing")
+    try:
+        return json.loads(file.read_text())
+    except json.JSONDecodeError as error:
+        raise DatasetError(f"{file} is corrupted: {error}") from error
+
+
+def _check_expected(actual: Any, expected: Any, where: str) -> None:
+    if isinstance(expected, Mapping):
+        if not isinstance(actual, Mapping):
+            raise DatasetError(f"dataset metadata {where or 'root'} is {actual!r}, expected a mapping")
+        for field, value in expected.items():
+            name = f"{where}.{field}" if where else str(field)
+            if field not in actual:
+                raise DatasetError(f"dataset metadata has no field {name!r} (expected {value!r})")
+            _check_expected(actual[field], value, name)
+    elif actual != expected:
+        raise DatasetError(f"dataset metadata field {where!r} is {actual!r}, expected {expected!r}")
+
+
+def load_demonstrations(
+    path: str | os.PathLike,
+    expected: Mapping[str, Any] | EnvBase | None = None,
+    *,
+    verify_checksum: bool = True,
+) -> TensorDictBase:
+    """Loads a dataset written by :func:`collect_demonstrations`, refusing a bad one.
+
+    Args:
+        path: the dataset directory.
+        expected: metadata the dataset must match: a (nested) mapping of fields, e.g.
+            ``{"regime": "train", "env": {"maze": "medium"}}``, or an env whose config
+            (batch size aside) must be the recorded one.
+        verify_checksum: recompute the SHA-256 checksum (reads every byte once).
+
+    Returns:
+        The memory-mapped TensorDict of shape ``[N]``.
+
+    Raises:
+        DatasetError: a missing or unreadable file, a format version this code cannot
+            read, a missing key or a shape/dtype differing from the manifest, a checksum
+            mismatch (edited data or metadata), or metadata that differs from ``expected``.
+    """
+    path = Path(path)
+    metadata = read_metadata(path)
+    version = metadata.get("format_version")
+    if version != FORMAT_VERSION:
+        raise DatasetError(f"dataset {path} has format_version {version!r}; this code reads {FORMAT_VERSION}")
+    try:
+        data = TensorDict.load_memmap(path / _DATA_DIR)
+    except Exception as error:  # tensordict raises a variety of errors on truncated or missing files
+        raise DatasetError(f"dataset {path} cannot be read (truncated or missing file?): {error}") from error
+    manifest, found = metadata.get("manifest", {}), _manifest(data)
+    for name, entry in manifest.items():
+        if name not in found:
+            raise DatasetError(f"dataset {path} is missing key {name!r}")
+        if found[name] != entry:
+            raise DatasetError(f"dataset {path} key {name!r} is {found[name]}, the manifest records {entry}")
+    if extra := sorted(set(found) - set(manifest)):
+        raise DatasetError(f"dataset {path} has keys absent from its manifest: {extra}")
+    if verify_checksum and _checksum(data, metadata) != metadata.get("checksum"):
+        raise DatasetError(f"dataset {path} fails its checksum: its data or metadata were modified")
+    if isinstance(expected, EnvBase):
+        expected = {"env": {k: v for k, v in _env_config(expected).items() if k != "batch_size"}}
+    if expected is not None:
+        _check_expected(metadata, expected, "")
+    return data
