@@ -1,0 +1,23 @@
+"""Networks from the paper (Appendix E) and factories wrapping them as TorchRL modules."""
+
+from torchrl_causal.modules.factories import (
+    bounded_action_spec,
+    make_deterministic_actor,
+    make_gail_discriminator,
+    make_gail_value_network,
+    make_qvalue_network,
+    make_tanh_gaussian_actor,
+)
+from torchrl_causal.modules.networks import ResidualBlock, ResidualMLP, SkipMLP
+
+__all__ = [
+    "ResidualBlock",
+    "ResidualMLP",
+    "SkipMLP",
+    "bounded_action_spec",
+    "make_deterministic_actor",
+    "make_gail_discriminator",
+    "make_gail_value_network",
+    "make_qvalue_network",
+    "make_tanh_gaussian_actor",
+]

@@ -1,0 +1,167 @@
+"""Network bodies from the paper's Appendix E ("Network architecture").
+
+These are plain :class:`torch.nn.Module` s that map concatenated inputs to an output
+vector; :mod:`torchrl_causal.modules.factories` wraps them into TorchRL actors, critics
+and discriminators with TorchRL keys. Squashing to the action bounds is left to the
+TorchRL pieces that own the bounds (:class:`~torchrl.modules.TanhNormal` for stochastic
+actors, :class:`~torchrl.modules.TanhModule` for deterministic ones), so the bodies stay
+unbounded and can serve as critics too.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+__all__ = ["ResidualBlock", "ResidualMLP", "SkipMLP"]
+
+
+def _check_positive(name: str, value: int) -> None:
+    if not isinstance(value, int) or value < 1:
+        raise ValueError(f"{name} must be a positive integer, got {value!r}.")
+
+
+def _check_dropout(dropout: float) -> None:
+    if not 0.0 <= dropout < 1.0:
+        raise ValueError(f"dropout must lie in [0, 1), got {dropout!r}.")
+
+
+def _concat(inputs: tuple[torch.Tensor, ...]) -> torch.Tensor:
+    # TorchRL critics receive (observation, action) as separate tensors.
+    return inputs[0] if len(inputs) == 1 else torch.cat(inputs, dim=-1)
+
+
+class ResidualBlock(nn.Module):
+    """Pre-norm residual block: ``x + Linear(Dropout(SiLU(LN(Linear(SiLU(LN(x)))))))``.
+
+    Args:
+        width (int): feature width of the block's input and output.
+        dropout (float, optional): dropout probability before the second linear
+            layer. Defaults to ``0.0``.
+
+    Examples:
+        >>> import torch
+        >>> block = ResidualBlock(8)
+        >>> block(torch.zeros(5, 8)).shape
+        torch.Size([5, 8])
+    """
+
+    def __init__(self, width: int, dropout: float = 0.0) -> None:
+        super().__init__()
+        _check_positive("width", width)
+        _check_dropout(dropout)
+        self.body = nn.Sequential(
+            nn.LayerNorm(width),
+            nn.SiLU(),
+            nn.Linear(width, width),
+            nn.LayerNorm(width),
+            nn.SiLU(),
+            nn.Dropout(dropout),
+            nn.Linear(width, width),
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x + self.body(x)
+
+
+class ResidualMLP(nn.Module):
+    """The paper's residual MLP backbone (actor and Q-networks of every algorithm).
+
+    A linear projection to ``hidden`` features, ``num_blocks`` :class:`ResidualBlock` s
+    and a linear output head. Several inputs are concatenated along the last dimension,
+    so a Q-network is ``ResidualMLP(obs_dim + act_dim, 1)`` called as ``net(obs, act)``.
+
+    Args:
+        in_features (int): size of the (concatenated) input.
+        out_features (int): size of the output.
+
+    Keyword Args:
+        hidden (int, optional): hidden width. Defaults to ``256`` (paper).
+        num_blocks (int, optional): number of residual blocks. Defaults to ``3``
+            (paper's SQIL, IQ-Learn and GAIL actors; BC uses ``4``).
+        dropout (float, optional): dropout inside each block. Defaults to ``0.0``
+            (paper's actors use ``0.05``, BC ``0.0``).
+
+    Examples:
+        >>> import torch
+        >>> net = ResidualMLP(3 + 2, 1, hidden=16, num_blocks=2)
+        >>> net(torch.zeros(4, 3), torch.zeros(4, 2)).shape
+        torch.Size([4, 1])
+    """
+
+    def __init__(
+        self,
+        in_features: int,
+        out_features: int,
+        *,
+        hidden: int = 256,
+        num_blocks: int = 3,
+        dropout: float = 0.0,
+    ) -> None:
+        super().__init__()
+        _check_positive("in_features", in_features)
+        _check_positive("out_features", out_features)
+        _check_positive("hidden", hidden)
+        if not isinstance(num_blocks, int) or num_blocks < 0:
+            raise ValueError(f"num_blocks must be a non-negative integer, got {num_blocks!r}.")
+        self.in_features = in_features
+        self.projection = nn.Linear(in_features, hidden)
+        self.blocks = nn.Sequential(*(ResidualBlock(hidden, dropout) for _ in range(num_blocks)))
+        self.head = nn.Linear(hidden, out_features)
+
+    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+        x = _concat(inputs)
+        if x.shape[-1] != self.in_features:
+            raise ValueError(
+                f"ResidualMLP expects {self.in_features} input features, got {x.shape[-1]} "
+                f"(input shapes {[tuple(t.shape) for t in inputs]})."
+            )
+        return self.head(self.blocks(self.projection(x)))
+
+
+class SkipMLP(nn.Module):
+    """Three-layer ReLU MLP with a skip connection around the middle layer (GAIL's discriminator).
+
+    ``h1 = Dropout(ReLU(L1(x)))``, ``h2 = h1 + Dropout(ReLU(L2(h1)))``, ``out = L3(h2)``.
+
+    Args:
+        in_features (int): size of the (concatenated) input.
+        out_features (int): size of the output.
+
+    Keyword Args:
+        hidden (int, optional): hidden width. Defaults to ``256``.
+        dropout (float, optional): dropout after each hidden activation.
+            Defaults to ``0.2`` (paper's discriminator).
+        output_activation (type of nn.Module, optional): applied to the output,
+            e.g. :class:`torch.nn.Sigmoid` for a probability. Defaults to ``None``.
+
+    Examples:
+        >>> import torch
+        >>> net = SkipMLP(4, 1, hidden=8, output_activation=torch.nn.Sigmoid)
+        >>> out = net(torch.zeros(2, 3), torch.zeros(2, 1))
+        >>> out.shape, bool(((out > 0) & (out < 1)).all())
+        (torch.Size([2, 1]), True)
+    """
+
+    def __init__(
+        self,
+        in_features: int,
+        out_features: int,
+        *,
+        hidden: int = 256,
+        dropout: float = 0.2,
+        output_activation: type[nn.Module] | None = None,
+    ) -> None:
+        super().__init__()
+        _check_positive("in_features", in_features)
+        _check_positive("out_features", out_features)
+        _check_positive("hidden", hidden)
+        _check_dropout(dropout)
+        self.input_layer = nn.Sequential(nn.Linear(in_features, hidden), nn.ReLU(), nn.Dropout(dropout))
+        self.hidden_layer = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Dropout(dropout))
+        self.head = nn.Linear(hidden, out_features)
+        self.output_activation = nn.Identity() if output_activation is None else output_activation()
+
+    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+        h = self.input_layer(_concat(inputs))
+        return self.output_activation(self.head(h + self.hidden_layer(h)))
