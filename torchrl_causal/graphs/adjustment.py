@@ -1,0 +1,419 @@
+"""Adjustment sets: the full-horizon computation, the paper's windowed Algorithm 1, the
+relaxed window used when exact imitability fails, and the non-causal baselines.
+
+Decisions where the paper is ambiguous (each verified by the tests):
+
+* Lags. Algorithm 1's line 14 enumerates lags ``-1..-k``, but its encoder (Algorithm 2)
+  feeds the current state too. Following the encoder, a window of size ``k`` holds the
+  state variables at lags ``0..k`` and the action at ``1..k`` (lag 0 = current step);
+  these are exactly the observed nodes of the horizon-``(k+1)`` proxy that precede its
+  last action.
+* Non-boundary actions get the empty set in Algorithm 1 (line 8), whereas a window
+  conditions every step on the same lags. Exact mode therefore re-checks the window's own
+  family against Definition 2 on the proxy and on a horizon-``(3k+3)`` diagram and refuses
+  (``NotImitableError``) if the fixed-lag window is not admissible.
+* The reward at every slice (``reward_slices="all"``) makes ``pa(Y)`` reach back to
+  ``t = 0``: with ``Y`` in the last slice, as Assumption 1 states, such templates never
+  satisfy it, so exact windows need ``reward_slices="last"``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Iterable, Mapping
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Literal
+
+from .criteria import _AncestralView, _check_action, _find_ox_map, sequential_pi_backdoor
+from .diagram import CausalDiagram
+from .errors import BoundedInfluenceError, GraphError, NotImitableError
+from .template import REWARD, TimeSliceTemplate
+from .window import AdjustmentWindow
+
+Node = Hashable
+
+__all__ = [
+    "BoundedInfluence",
+    "ExactAdjustment",
+    "check_bounded_influence",
+    "exact_adjustment",
+    "observation_window",
+    "windowed_adjustment",
+]
+
+
+def _check_k(k: object) -> int:
+    if isinstance(k, bool) or not isinstance(k, int) or k < 0:
+        raise GraphError(f"window size k must be an int >= 0, got {k!r}")
+    return k
+
+
+# ---------------------------------------------------------------------- Algorithm 1 core
+@dataclass(frozen=True)
+class ExactAdjustment:
+    """The sequential pi-backdoor sets of one diagram, as Kumor et al. construct them.
+
+    ``Z_t = (MB ∪ BA) ∩ before(X_t)`` for a boundary action and ``∅`` otherwise
+    (Algorithm 1, lines 4-10). The sets are prefixes of one temporally sorted list, so they
+    are produced on demand instead of being stored (they grow linearly with ``t``).
+
+    Attributes:
+        diagram: the diagram the sets are for.
+        actions: the action nodes in temporal order.
+        ox: FindOX's ``O^X``.
+        markov_boundary: ``MB = Pa+(C(Ch+(O^X))) \\ O^X`` in the projection of ``G^Y_{X'}``.
+        boundary_actions: actions in ``O^X`` with an effective child outside ``O^X``.
+    """
+
+    diagram: CausalDiagram
+    actions: tuple[Node, ...]
+    ox: frozenset[Node]
+    markov_boundary: frozenset[Node]
+    boundary_actions: frozenset[Node]
+
+    def adjustment_set(self, action: Node) -> frozenset[Node]:
+        if action not in self.boundary_actions:
+            if action not in self.actions:
+                raise GraphError(f"{action!r} is not an action of this diagram")
+            return frozenset()
+        before = self.diagram.before(action)
+        return frozenset(v for v in self.markov_boundary | self.boundary_actions if v in before)
+
+    @property
+    def family(self) -> dict[Node, frozenset[Node]]:
+        """Every action's set (materialised; quadratic in the horizon)."""
+        return {x: self.adjustment_set(x) for x in self.actions}
+
+
+def _relaxed_witness(
+    diagram: CausalDiagram, actions: list[int], candidates: list[int], view: _AncestralView
+) -> tuple[Node, ...]:
+    """An open path for one of ``candidates`` under the largest candidate family: every
+    observed ancestor of the reward that precedes the action. Since no family works, some
+    action fails under this one; the latest failing candidate is the cheapest to check
+    (fewest later actions to re-parent)."""
+    g = diagram
+    rank = g._rank
+    observed_ancestors = sorted((v for v in view.component if v != view.reward), key=rank.__getitem__)
+
+    def prefix(x: int) -> set[int]:
+        return {v for v in observed_ancestors if rank[v] < rank[x]}
+
+    for x in sorted(candidates, key=rank.__getitem__, reverse=True):
+        future = {f: prefix(f) for f in actions if rank[f] > rank[x]}
+        _, path = _check_action(g, x, prefix(x), future, view.reward)
+        if path is not None:
+            return tuple(g._nodes[v] for v in path)
+    return ()
+
+
+def _algorithm1(diagram: CausalDiagram, actions: Iterable[Node], reward: Node) -> ExactAdjustment:
+    """FindOX, the imitability test, Markov boundary and boundary actions (lines 2-10)."""
+    g = diagram
+    ox_map, view = _find_ox_map(g, actions, reward)
+    rank = g._rank
+    action_ids = sorted(g._ids(actions), key=rank.__getitem__)
+    failing = [x for x in action_ids if x in view.nodes and x not in ox_map]
+    if failing:
+        names = [g._nodes[x] for x in failing]
+        shown = ", ".join(map(repr, names[:6])) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
+        witness = _relaxed_witness(g, action_ids, failing, view)
+        raise NotImitableError(
+            f"no sequential pi-backdoor adjustment exists: FindOX leaves out {shown}; "
+            f"even conditioning on every observed ancestor of {g._nodes[view.reward]!r} leaves open "
+            f"{' ~ '.join(map(repr, witness))}",
+            actions=names,
+            witness=witness,
+        )
+    ox = set(ox_map)
+    acting = {x for x in action_ids if x in ox}
+    # Ch(O^X) in the projection of G^Y with the outgoing edges of X' = O^X ∩ X removed.
+    reached = set(ox)
+    for v in ox - acting:
+        reached.update(view.ch_plus(v) or ())
+    components = {view.component[v] for v in reached}
+    boundary: set[int] = set()
+    for comp in components:
+        members = view.members[comp]
+        boundary.update(members)
+        boundary.update(view.projected_parents(comp))
+    # Removing the edges out of X' only removes projected parents in X' ⊆ O^X, which MB
+    # excludes anyway; it matters through Ch(O^X), which skips the children of X'.
+    boundary -= ox
+    boundary_actions = {x for x in acting if not set(view.ch_plus(x) or ()) <= ox}
+    names = g._nodes
+    return ExactAdjustment(
+        diagram=g,
+        actions=tuple(names[x] for x in action_ids),
+        ox=frozenset(names[v] for v in ox),
+        markov_boundary=frozenset(names[v] for v in boundary),
+        boundary_actions=frozenset(names[v] for v in boundary_actions),
+    )
+
+
+def exact_adjustment(template: TimeSliceTemplate, horizon: int) -> ExactAdjustment:
+    """The full-horizon sequential pi-backdoor computation on ``template.unroll(horizon)``.
+
+    Raises:
+        NotImitableError: when some action has no admissible set; it names the actions and
+            carries an open path for one of them.
+
+    Examples:
+        >>> from torchrl_causal.envs.templates import ANTMAZE_TEMPLATE
+        >>> try:
+        ...     exact_adjustment(ANTMAZE_TEMPLATE, 3)
+        ... except NotImitableError as err:
+        ...     ('O', 2) in err.witness
+        True
+    """
+    diagram = template.unroll(horizon)
+    return _algorithm1(diagram, [(template.action, t) for t in range(horizon)], REWARD)
+
+
+# ---------------------------------------------------------------------- Assumption 1
+@dataclass(frozen=True)
+class BoundedInfluence:
+    """The outcome of :func:`check_bounded_influence`.
+
+    Attributes:
+        k: the window size asked about (None when only the bound was asked for).
+        required_k: the smallest k satisfying Assumption 1(i), None when no k does.
+        chain: for the farthest-reaching node, the path in the latent projection that makes
+            its extended parent so early (bidirected steps within its C-component, then the
+            last edge into the extended parent).
+        horizon: the horizon of the unrolled diagram the chain comes from.
+    """
+
+    k: int | None
+    required_k: int | None
+    chain: tuple[Node, ...]
+    horizon: int
+
+    @property
+    def bounded(self) -> bool:
+        return self.required_k is not None
+
+    @property
+    def holds(self) -> bool:
+        """Whether Assumption 1(i) holds for :attr:`k`."""
+        return self.required_k is not None and self.k is not None and self.required_k <= self.k
+
+    @property
+    def message(self) -> str:
+        chain = " ~ ".join(map(repr, self.chain))
+        if self.required_k is None:
+            return (
+                "extended parents reach arbitrarily far back, so Assumption 1(i) fails for every k; "
+                f"at horizon {self.horizon}: {chain}"
+            )
+        verdict = "" if self.k is None else (" (holds)" if self.holds else f" (fails for k={self.k})")
+        return f"Assumption 1(i) needs k >= {self.required_k}{verdict}: {chain}"
+
+
+def _slice_of(node: Node, horizon: int) -> int:
+    return horizon if node == REWARD else node[1]  # type: ignore[index]
+
+
+def _farthest_extended_parent(projection: CausalDiagram, horizon: int) -> tuple[int, tuple[Node, ...]]:
+    """max over nodes v of slice(v) - slice(earliest node of pa+(v)), with its chain.
+
+    One pass in topological order with a union-find: when ``v`` is added, its class is its
+    C-component in ``G(v)``; each class keeps its earliest member-or-parent.
+    """
+    g = projection
+    names = g._nodes
+    time = [_slice_of(v, horizon) for v in names]
+    root: dict[int, int] = {}
+    earliest: dict[int, tuple[int, int]] = {}  # class root -> (time, node)
+
+    def find(v: int) -> int:
+        while root[v] != v:
+            root[v] = root[root[v]]
+            v = root[v]
+        return v
+
+    best = (-1, -1, -1)  # (lag, node, extended parent)
+    for v in g._order:
+        root[v] = v
+        earliest[v] = min([(time[v], v)] + [(time[p], p) for p in g._pa[v]])
+        for s in g._sp[v]:
+            if s in root:
+                a, b = find(s), find(v)
+                if a != b:
+                    root[a] = b
+                    earliest[b] = min(earliest[a], earliest[b])
+        t_far, far = earliest[find(v)]
+        if time[v] - t_far > best[0]:
+            best = (time[v] - t_far, v, far)
+    lag, v, far = best
+    return lag, _extended_parent_chain(g, v, far)
+
+
+def _extended_parent_chain(g: CausalDiagram, v: int, far: int) -> tuple[Node, ...]:
+    """Bidirected path from ``v`` through its predecessors to a member that is ``far`` or a
+    child of ``far``, then ``far``."""
+    if far == v:
+        return (g._nodes[v],)
+    rank = g._rank
+    prev = {v: -1}
+    queue = [v]
+    for u in queue:
+        if u == far or far in g._pa[u]:
+            path = [far] if u != far else []
+            while u != -1:
+                path.append(u)
+                u = prev[u]
+            return tuple(g._nodes[i] for i in reversed(path))
+        for s in g._sp[u]:
+            if s not in prev and rank[s] < rank[v]:
+                prev[s] = u
+                queue.append(s)
+    raise AssertionError("the extended parent must be reachable")  # pragma: no cover
+
+
+@lru_cache(maxsize=128)
+def _influence_bound(template: TimeSliceTemplate) -> tuple[int | None, tuple[Node, ...], int]:
+    # Without a repeated variable, a latent-interior edge spans at most (latent+1)*L steps
+    # and a C-component chain at most (variables) such edges; a repeat can be pumped, and
+    # then the requirement grows with the horizon. Comparing two horizons past that bound
+    # tells the cases apart.
+    lag = max(template.max_lag, 1)
+    short = (len(template.variables) + 1) * (len(template.latent) + 1) * lag + 2
+    long = 2 * short + 1
+    r_short, chain = _farthest_extended_parent(template.unroll(short).latent_projection(), short)
+    r_long, _ = _farthest_extended_parent(template.unroll(long).latent_projection(), long)
+    return (None if r_long > r_short else r_short), chain, short
+
+
+def check_bounded_influence(template: TimeSliceTemplate, k: int | None = None) -> BoundedInfluence:
+    """Test Assumption 1(i) on the latent projection onto the observed variables and ``Y``
+    (``Y`` counted in the last slice): every extended parent of a slice-``t`` node lies at
+    ``t - k`` or later.
+
+    Returns the smallest sufficient ``k`` (``required_k``), or ``None`` when the extended
+    parents are unbounded, with the chain that makes it so.
+
+    Examples:
+        >>> pa_plus_example = TimeSliceTemplate(
+        ...     variables=("O", "X"), action="X", observed=("O", "X"),
+        ...     directed=[("O", "X", 0), ("X", "O", 1), ("X", "X", 1)],
+        ...     bidirected=[("O", "O", 1), ("X", "X", 1)],
+        ...     reward_parents=("X",), reward_bidirected=("O",), reward_slices="last")
+        >>> check_bounded_influence(pa_plus_example, 2).bounded
+        False
+    """
+    if k is not None:
+        _check_k(k)
+    required, chain, horizon = _influence_bound(template)
+    return BoundedInfluence(k=k, required_k=required, chain=chain, horizon=horizon)
+
+
+# ---------------------------------------------------------------------- windows
+def _window_lags(template: TimeSliceTemplate, variables: Iterable[str], k: int) -> dict[str, tuple[int, ...]]:
+    chosen = set(variables)
+    lags = {v: tuple(range(k + 1)) for v in template.variables if v in chosen and v != template.action}
+    if template.action in chosen and k >= 1:
+        lags[template.action] = tuple(range(1, k + 1))
+    return lags
+
+
+def _window_family(window: AdjustmentWindow, action: str, horizon: int) -> dict[Node, frozenset[Node]]:
+    return {(action, t): window.adjustment_set(t) for t in range(horizon)}
+
+
+def _open_paths(template: TimeSliceTemplate, window: AdjustmentWindow, horizon: int) -> tuple[tuple[Node, ...], ...]:
+    actions = [(template.action, t) for t in range(horizon)]
+    report = sequential_pi_backdoor(
+        template.unroll(horizon), actions, REWARD, _window_family(window, template.action, horizon)
+    )
+    return tuple(report.witnesses.values())
+
+
+def windowed_adjustment(
+    template: TimeSliceTemplate, k: int, mode: Literal["exact", "relaxed"] = "exact"
+) -> AdjustmentWindow:
+    """The paper's Algorithm 1: a fixed window of ``k`` past steps to condition on.
+
+    ``mode="exact"`` runs FindOX on the horizon-``(k+1)`` proxy, builds the Markov
+    boundary and boundary actions, and keeps every variable type that appears in a set
+    (states at lags ``0..k``, the action at ``1..k``). It raises ``NotImitableError`` when
+    no admissible family exists (naming the actions, with an open path), and
+    :class:`BoundedInfluenceError` when Assumption 1(i) fails for ``k``, instead of
+    returning a window that Theorem 1 does not cover.
+
+    ``mode="relaxed"`` keeps the set FindOX starts from: the observed ancestors of the
+    reward (a pure collider such as the compass ``W`` reaches nothing and drops out), at
+    the same lags, with ``exact=False`` and ``witnesses`` listing the paths that stay open
+    in the proxy, so the remaining bias is explicit.
+
+    Examples:
+        >>> from torchrl_causal.envs.templates import ANTMAZE_TEMPLATE
+        >>> w = windowed_adjustment(ANTMAZE_TEMPLATE, 2, mode="relaxed")
+        >>> sorted(w.excluded), w.lags["X"], w.exact
+        (['W'], (1, 2), False)
+    """
+    k = _check_k(k)
+    if mode == "relaxed":
+        variables = template.reward_ancestors() & set(template.observed)
+        window = AdjustmentWindow(
+            k=k,
+            action=template.action,
+            lags=_window_lags(template, variables, k),
+            excluded=frozenset(template.observed) - variables,
+            exact=False,
+            observed=template.observed,
+        )
+        return AdjustmentWindow(**{**window.__dict__, "witnesses": _open_paths(template, window, k + 1)})
+    if mode != "exact":
+        raise GraphError(f"mode must be 'exact' or 'relaxed', got {mode!r}")
+    proxy = _algorithm1(template.unroll(k + 1), [(template.action, t) for t in range(k + 1)], REWARD)
+    influence = check_bounded_influence(template, k)
+    if not influence.holds:
+        raise BoundedInfluenceError(f"cannot use a window of k={k}: {influence.message}")
+    variables = {v for x in proxy.actions for v, _ in proxy.adjustment_set(x)}  # type: ignore[misc]
+    window = AdjustmentWindow(
+        k=k,
+        action=template.action,
+        lags=_window_lags(template, variables, k),
+        excluded=frozenset(template.observed) - variables,
+        exact=True,
+        observed=template.observed,
+    )
+    for horizon in (k + 1, 3 * k + 3):
+        open_paths = _open_paths(template, window, horizon)
+        if open_paths:
+            raise NotImitableError(
+                f"Algorithm 1's sets exist for k={k}, but the fixed window {dict(window.lags)} is not "
+                f"admissible at horizon {horizon}: {' ~ '.join(map(repr, open_paths[0]))} stays open",
+                actions=[path[0] for path in open_paths],
+                witness=open_paths[0],
+            )
+    return window
+
+
+def observation_window(template: TimeSliceTemplate, k: int | None = None) -> AdjustmentWindow:
+    """The non-causal baselines' input as a window (nothing excluded, ``exact=False``).
+
+    ``k=None`` is the paper's ``V^O_t``: every observed state variable at lag 0 and the
+    previous action (window ``k=1``). An int ``k`` stacks every observed variable, ``W``
+    included, at the lags a causal window of size ``k`` uses (states ``0..k``, the action
+    ``1..k``), for window-matched comparisons.
+
+    Examples:
+        >>> from torchrl_causal.envs.templates import ANTMAZE_TEMPLATE
+        >>> w = observation_window(ANTMAZE_TEMPLATE)
+        >>> w.k, w.lags["W"], w.lags["X"]
+        (1, (0,), (1,))
+    """
+    if k is None:
+        lags = {v: (0,) for v in template.observed if v != template.action}
+        lags[template.action] = (1,)
+        return AdjustmentWindow(k=1, action=template.action, lags=lags, exact=False, observed=template.observed)
+    k = _check_k(k)
+    return AdjustmentWindow(
+        k=k,
+        action=template.action,
+        lags=_window_lags(template, template.observed, k),
+        exact=False,
+        observed=template.observed,
+    )
