@@ -6,6 +6,7 @@ variables latent to the imitator live under ``("latent", name)`` and the confoun
 ``("scm", name)``.
 """
 
+from torchrl_causal.envs.antmaze import AntMazeEnv
 from torchrl_causal.envs.base import (
     REGIMES,
     CompassSensor,
@@ -15,6 +16,7 @@ from torchrl_causal.envs.base import (
     rotate,
 )
 from torchrl_causal.envs.experts import RoverExpert
+from torchrl_causal.envs.humanoidmaze import HumanoidMazeEnv
 from torchrl_causal.envs.planner import MAZE_MAPS, MazeLayout, MazePlanner
 from torchrl_causal.envs.route_choice import RouteChoiceEnv, route_choice_value
 from torchrl_causal.envs.rover_maze import ROVER_TASKS, RoverMazeEnv, RoverParameters, rover_dynamics
@@ -23,10 +25,12 @@ __all__ = [
     "MAZE_MAPS",
     "REGIMES",
     "ROVER_TASKS",
+    "AntMazeEnv",
     "CompassSensor",
     "ConfoundedEnv",
     "GustConfoundedEnv",
     "GustProcess",
+    "HumanoidMazeEnv",
     "MazeLayout",
     "MazePlanner",
     "RouteChoiceEnv",
