@@ -1,0 +1,183 @@
+"""From a resolved config to the pieces every trainer shares: envs, the adjustment
+window, the expert, demonstrations and their causal encoding.
+
+Everything the policy sees goes through one :class:`CausalWindowTransform` built from
+``cfg.window`` and ``cfg.causal``: the same window encodes online rollouts (collector and
+evaluation envs) and the offline demonstrations, so train and test inputs agree.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import torch
+from hydra.utils import get_class, instantiate
+from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Binary, Bounded, Composite, TensorSpec
+from torchrl.envs import EnvBase, Transform, TransformedEnv
+
+from torchrl_causal.graphs.window import AdjustmentWindow
+from torchrl_causal.transforms import CausalWindowTransform
+
+__all__ = [
+    "RelaxedBinaryAction",
+    "make_env",
+    "make_window",
+    "make_imitator_env",
+    "make_expert",
+    "load_or_collect_demonstrations",
+    "expert_transitions",
+    "observation_dim",
+    "maze_geometry",
+    "TRANSITION_KEYS",
+]
+
+# What the IL losses read from a replay batch (the cross-team contract), plus the flag.
+TRANSITION_KEYS: tuple = (
+    "observation",
+    "action",
+    ("next", "observation"),
+    ("next", "done"),
+    ("next", "terminated"),
+)
+
+
+class RelaxedBinaryAction(Transform):
+    """Presents a binary action (e.g. Route Choice's X) as a continuous one in ``[0, 1]``.
+
+    The continuous-control actors of every algorithm output a bounded real action; the
+    env receives ``action > 0.5``. This is the algorithms' relaxation, not part of the
+    env's mechanism, so it lives with the trainers.
+
+    Examples:
+        >>> from torchrl_causal.envs import RouteChoiceEnv
+        >>> env = TransformedEnv(RouteChoiceEnv(batch_size=(3,), seed=0), RelaxedBinaryAction())
+        >>> spec = env.action_spec
+        >>> isinstance(spec, Bounded), spec.space.low.unique().item(), spec.space.high.unique().item()
+        (True, 0.0, 1.0)
+        >>> td = env.reset().set("action", torch.tensor([[0.2], [0.7], [0.5]]))
+        >>> env.step(td)["next", "terminated"].shape
+        torch.Size([3, 1])
+    """
+
+    def __init__(self, action_key: str = "action") -> None:
+        super().__init__(in_keys_inv=[action_key], out_keys_inv=[action_key])
+
+    def _inv_apply_transform(self, action: torch.Tensor) -> torch.Tensor:
+        return (action > 0.5).to(action.dtype)
+
+    def transform_action_spec(self, action_spec: TensorSpec) -> TensorSpec:
+        if isinstance(action_spec, Composite):
+            for key in self.in_keys_inv:
+                action_spec[key] = self.transform_action_spec(action_spec[key])
+            return action_spec
+        if not isinstance(action_spec, Binary):
+            raise TypeError(f"RelaxedBinaryAction expects a Binary action spec, got {type(action_spec).__name__}")
+        return Bounded(0.0, 1.0, shape=action_spec.shape, device=action_spec.device, dtype=torch.float32)
+
+
+def make_env(cfg: DictConfig, regime: str, batch_size: int, seed: int) -> EnvBase:
+    """The raw confounded env of ``cfg.env`` (every key, latent ones included)."""
+    return instantiate(
+        cfg.env.make,
+        regime=regime,
+        batch_size=(batch_size,),
+        horizon=int(cfg.env.horizon),
+        confounding_strength=float(cfg.env.confounding_strength),
+        seed=int(seed),
+    )
+
+
+def make_window(cfg: DictConfig, env: EnvBase) -> AdjustmentWindow:
+    """The adjustment window the imitator conditions on (``cfg.causal``, ``cfg.window``)."""
+    return CausalWindowTransform.from_env(
+        env,
+        int(cfg.window.k),
+        causal=bool(cfg.causal),
+        mode=str(cfg.window.mode),
+        window_matched=bool(cfg.window.window_matched),
+    ).window
+
+
+def _needs_relaxation(env: EnvBase) -> bool:
+    spec = env.full_action_spec["action"]
+    return isinstance(spec, Binary)
+
+
+def make_imitator_env(cfg: DictConfig, window: AdjustmentWindow, regime: str, batch_size: int, seed: int) -> TransformedEnv:
+    """The env as the imitator sees it: the window's encoding in ``"observation"``, the
+    collider and the latent variables removed, a continuous action."""
+    base = make_env(cfg, regime, batch_size, seed)
+    env = TransformedEnv(base, CausalWindowTransform(window))
+    if _needs_relaxation(base):
+        env.append_transform(RelaxedBinaryAction())
+    return env
+
+
+def observation_dim(env: EnvBase) -> int:
+    """Width of the encoded ``"observation"`` of an imitator env."""
+    return int(env.observation_spec["observation"].shape[-1])
+
+
+def make_expert(cfg: DictConfig, env: EnvBase) -> Callable[[TensorDictBase], TensorDictBase]:
+    """The env's expert policy (``cfg.env.expert``), which reads the latent variables."""
+    target = get_class(cfg.env.expert._target_)
+    kwargs = {k: v for k, v in OmegaConf.to_container(cfg.env.expert, resolve=True).items() if k != "_target_"}
+    return target(env, **kwargs)
+
+
+def load_or_collect_demonstrations(cfg: DictConfig, progress: bool = False) -> TensorDictBase:
+    """Loads the demonstration set at ``cfg.demos.path``, collecting it with the expert first
+    if it does not exist yet (train regime, ``cfg.demos.episodes`` episodes).
+
+    Collection is atomic (see :func:`~torchrl_causal.data.collect_demonstrations`), so runs
+    started side by side may both collect, and one of the identical sets wins.
+    """
+    from torchrl_causal.data import collect_demonstrations, load_demonstrations
+
+    path = Path(cfg.demos.path)
+    if not path.exists():
+        episodes = int(cfg.demos.episodes)
+        env = make_env(cfg, "train", min(episodes, 64), int(cfg.demos.seed))
+        collect_demonstrations(env, make_expert(cfg, env), episodes, path)
+    return load_demonstrations(path)
+
+
+def expert_transitions(window: AdjustmentWindow, demonstrations: TensorDictBase) -> TensorDict:
+    """Demonstrations encoded by ``window`` into the replay format, ``"expert"`` = True.
+
+    Binary actions are kept as 0/1 floats, which is what :class:`RelaxedBinaryAction`
+    presents to the actor.
+    """
+    encoded = CausalWindowTransform(window).encode_trajectories(demonstrations)
+    out = encoded.select(*TRANSITION_KEYS).clone()
+    out.set("action", out.get("action").to(torch.float32))
+    out.set("expert", torch.ones((*out.batch_size, 1), dtype=torch.bool))
+    return out
+
+
+def maze_geometry(env: EnvBase) -> dict[str, Any] | None:
+    """Walls (axis-aligned ``[x0, y0, x1, y1]`` rectangles), start and goal of a maze env
+    with a :class:`~torchrl_causal.envs.MazeLayout`, for the report's trajectory figure;
+    ``None`` for envs without a maze (Route Choice).
+
+    Examples:
+        >>> from torchrl_causal.envs import RoverMazeEnv
+        >>> geometry = maze_geometry(RoverMazeEnv(maze="u", batch_size=(1,), seed=0))
+        >>> len(geometry["walls"]), geometry["walls"][0]
+        (18, [-2.5, 1.5, -1.5, 2.5])
+    """
+    layout = getattr(env, "layout", None)
+    if layout is None:
+        return None
+    half = layout.cell_size / 2
+    centres = layout.cell_center(layout.walls.nonzero()).tolist()
+    position = lambda name: getattr(env, name).reshape(-1)[:2].tolist() if hasattr(env, name) else None  # noqa: E731
+    return {
+        "walls": [[x - half, y - half, x + half, y + half] for x, y in centres],
+        "start": position("start_position"),
+        "goal": position("goal_position"),
+    }
