@@ -11,7 +11,7 @@ from tensordict.nn import TensorDictModuleBase
 from torchrl_causal.envs.planner import MazePlanner
 from torchrl_causal.envs.rover_maze import RoverMazeEnv, RoverParameters
 
-__all__ = ["RoverExpert"]
+__all__ = ["RouteChoiceExpert", "RoverExpert"]
 
 
 class RoverExpert(TensorDictModuleBase):
@@ -58,4 +58,30 @@ class RoverExpert(TensorDictModuleBase):
         turn = (error / self.params.turn_rate).clamp(-1.0, 1.0)
         throttle = torch.cos(error).clamp(self.min_throttle, 1.0)
         tensordict.set("action", torch.cat((throttle, turn), dim=-1))
+        return tensordict
+
+
+class RouteChoiceExpert(TensorDictModuleBase):
+    """The Route Choice expert: takes the route it faces, ``X = Z xor O`` (reads ``("latent", "O")``).
+
+    Args:
+        env: accepted for a uniform expert interface (``Expert(env)``); unused.
+
+    Examples:
+        >>> from torchrl_causal.envs import RouteChoiceEnv
+        >>> env = RouteChoiceEnv(batch_size=(4,), seed=0)
+        >>> td = RouteChoiceExpert(env)(env.reset())
+        >>> bool((td["action"] == (td["Z"].long() ^ td["latent", "O"].long()).float()).all())
+        True
+    """
+
+    in_keys = ["Z", ("latent", "O")]
+    out_keys = ["action"]
+
+    def __init__(self, env: object = None) -> None:
+        super().__init__()
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        goal_side, orientation = tensordict.get("Z").long(), tensordict.get(("latent", "O")).long()
+        tensordict.set("action", (goal_side ^ orientation).to(torch.float32))
         return tensordict
