@@ -16,6 +16,7 @@ import gymnasium
 import mujoco
 import numpy as np
 from torchrl_causal.envs.mujoco_maze import MazeTask, MujocoMazeEnv
+from torchrl_causal.envs.templates import ANTMAZE_TEMPLATE
 
 if TYPE_CHECKING:
     from torchrl_causal.graphs import TimeSliceTemplate
@@ -91,8 +92,7 @@ class AntMazeEnv(MujocoMazeEnv):
 
     @property
     def causal_template(self) -> TimeSliceTemplate:
-        from torchrl_causal.envs.templates import ANTMAZE_TEMPLATE
-
+        """The paper's slice graph (:data:`~torchrl_causal.envs.templates.ANTMAZE_TEMPLATE`)."""
         return ANTMAZE_TEMPLATE
 
     def _read_state(self, data: mujoco.MjData, row: np.ndarray) -> None:

@@ -20,6 +20,7 @@ import numpy as np
 import torchrl
 
 from torchrl_causal.envs.mujoco_maze import MazeTask, MujocoMazeEnv
+from torchrl_causal.envs.templates import HUMANOIDMAZE_TEMPLATE
 
 if TYPE_CHECKING:
     from torchrl_causal.graphs import TimeSliceTemplate
@@ -96,8 +97,7 @@ class HumanoidMazeEnv(MujocoMazeEnv):
 
     @property
     def causal_template(self) -> TimeSliceTemplate:
-        from torchrl_causal.envs.templates import HUMANOIDMAZE_TEMPLATE
-
+        """The paper's slice graph (:data:`~torchrl_causal.envs.templates.HUMANOIDMAZE_TEMPLATE`)."""
         return HUMANOIDMAZE_TEMPLATE
 
     @classmethod
