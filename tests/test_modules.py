@@ -171,6 +171,17 @@ def test_action_spec_errors_name_the_problem():
         bounded_action_spec(Bounded(-float("inf"), 1.0, shape=(2,)))
 
 
+def test_batched_env_action_spec_gives_per_step_bounds():
+    batched = Bounded(SPEC.space.low.expand(4, 2), SPEC.space.high.expand(4, 2), shape=(4, 2))
+    per_step = bounded_action_spec(batched)
+    assert per_step.shape == (2,) and torch.equal(per_step.space.low, SPEC.space.low)
+    actor = make_tanh_gaussian_actor(3, batched, hidden=8, num_blocks=1)
+    assert actor(obs_td(n=7))["action"].shape == (7, 2)
+    low = torch.tensor([[-1.0, -1.0], [-2.0, -1.0]])
+    with pytest.raises(ValueError, match="different bounds across its batch"):
+        bounded_action_spec(Bounded(low, torch.ones(2, 2), shape=(2, 2)))
+
+
 @settings(max_examples=15, deadline=None)
 @given(
     obs_dim=st.integers(1, 6),

@@ -37,12 +37,15 @@ __all__ = [
 
 
 def bounded_action_spec(action_spec: TensorSpec, action_key: NestedKey = "action") -> Bounded:
-    """Returns the continuous bounded spec of the action, unwrapping a :class:`~torchrl.data.Composite`.
+    """Returns the continuous bounded spec of one action, unwrapping a :class:`~torchrl.data.Composite`.
+
+    Leading batch dimensions (a batched env's ``action_spec``) are dropped; their bounds
+    must agree.
 
     Examples:
         >>> import torch
         >>> from torchrl.data import Bounded, Composite
-        >>> spec = Composite(action=Bounded(-1.0, 1.0, shape=(2,)))
+        >>> spec = Composite(action=Bounded(-1.0, 1.0, shape=(4, 2)), shape=(4,))
         >>> bounded_action_spec(spec).shape
         torch.Size([2])
     """
@@ -66,11 +69,16 @@ def bounded_action_spec(action_spec: TensorSpec, action_key: NestedKey = "action
     low, high = action_spec.space.low, action_spec.space.high
     if not (torch.isfinite(low).all() and torch.isfinite(high).all() and (high > low).all()):
         raise ValueError(f"action {action_key!r} needs finite bounds with high > low, got [{low}, {high}].")
+    while action_spec.ndim > 1:
+        first = action_spec[0]
+        if not ((action_spec.space.low == first.space.low).all() and (action_spec.space.high == first.space.high).all()):
+            raise ValueError(f"action {action_key!r} has different bounds across its batch dimensions.")
+        action_spec = first
     return action_spec
 
 
 def _action_dim(spec: Bounded) -> int:
-    return spec.shape[-1:].numel() if spec.shape else 1
+    return spec.shape.numel()
 
 
 def _bound(values: torch.Tensor) -> float | torch.Tensor:

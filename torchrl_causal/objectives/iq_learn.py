@@ -113,11 +113,17 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
             self.num_value_samples, *next_td.shape
         )
         samples.set(self.tensor_keys.action, actions)
-        target_q = self._vmap_qnetworkN0(samples, self.target_qvalue_network_params).get(
-            self.tensor_keys.state_action_value
-        )
-        soft_values = target_q.min(0)[0] - self._alpha * log_prob.unsqueeze(-1)
+        soft_values = self._target_q_per_critic(samples).min(0)[0] - self._alpha * log_prob.unsqueeze(-1)
         return soft_values.mean(0)
+
+    def _target_q_per_critic(self, samples: TensorDictBase) -> torch.Tensor:
+        # A plain loop over the critics, not SACLoss's vmap: on the K * batch rows a vmapped
+        # Linear becomes bmm plus a separate bias add, about 1.4x slower on CPU than addmm.
+        values = []
+        for params in self.target_qvalue_network_params.unbind(0):
+            with params.to_module(self.qvalue_network, preserve_module_state=False):
+                values.append(self.qvalue_network(samples).get(self.tensor_keys.state_action_value))
+        return torch.stack(values)
 
     def discounted_next_value(self, tensordict: TensorDictBase, next_value: torch.Tensor) -> torch.Tensor:
         r""":math:`\gamma (1 - d) \bar V(z')`: the TD(0) target of a zero reward, so TorchRL's estimator owns gamma and done handling."""
