@@ -11,7 +11,7 @@ import torch.distributions.normal
 from tensordict import TensorDict
 from torchrl.data import Bounded
 from torchrl.envs.utils import ExplorationType, set_exploration_type
-from torchrl.objectives import GAILLoss, SoftUpdate
+from torchrl.objectives import GAILLoss, SoftUpdate, ValueEstimators
 
 import torchrl_causal.objectives.bc
 import torchrl_causal.objectives.expert_sac
@@ -219,11 +219,21 @@ def test_iq_learn_rejects_a_batch_without_expert_rows():
         loss(batch)
 
 
-def test_losses_read_no_reward_and_name_iq_learn_apart_from_implicit_q_learning():
-    for cls in (SQILLoss, IQLearnLoss):
-        loss, _ = make_loss(cls, alpha=0.05)
-        assert "expert" in loss.in_keys and ("next", "reward") not in loss.in_keys
-    assert IQLearnLoss.__mro__[1].__name__ == "ExpertFlaggedSACLoss"
+@pytest.mark.parametrize("cls", [SQILLoss, IQLearnLoss])
+def test_expert_key_is_configurable_and_no_reward_is_read(cls):
+    loss, _ = make_loss(cls, alpha=0.05)
+    assert "expert" in loss.in_keys and ("next", "reward") not in loss.in_keys
+    loss.set_keys(expert="is_demo")
+    assert "is_demo" in loss.in_keys and "expert" not in loss.in_keys
+    batch = make_batch()
+    batch.rename_key_("expert", "is_demo")
+    assert torch.isfinite(loss(batch)["loss_qvalue"])
+
+
+def test_iq_learn_accepts_only_one_step_value_estimation():
+    loss, _ = make_loss(IQLearnLoss, alpha=0.05)
+    with pytest.raises(NotImplementedError):
+        loss.make_value_estimator(ValueEstimators.TD1)
     with pytest.raises(ValueError, match="num_value_samples"):
         make_loss(IQLearnLoss, alpha=0.05, num_value_samples=0)
 

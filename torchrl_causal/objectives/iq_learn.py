@@ -135,6 +135,7 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
         return self.value_estimator.value_estimate(zero_reward, next_value=next_value)
 
     def qvalue_v2_loss(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """The chi-squared critic loss; replaces SAC's soft Bellman regression in :meth:`forward`."""
         expert = self.expert_flag(tensordict).to(self.log_alpha.dtype)
         num_expert = expert.sum()
         if not num_expert:
