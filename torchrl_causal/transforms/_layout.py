@@ -17,7 +17,7 @@ from torchrl.data.tensor_specs import ContinuousBox
 
 from torchrl_causal.graphs.window import AdjustmentWindow
 
-__all__ = ["FeatureSlice", "WindowLayout", "spec_bounds"]
+__all__ = ["FeatureSlice", "LagRing", "WindowLayout", "spec_bounds"]
 
 
 class FeatureSlice(NamedTuple):
@@ -47,9 +47,12 @@ class WindowLayout:
         widths = {var: math.prod(shape) for var, shape in self.shapes.items()}
         framed = [var for var in self.shapes if var != window.action]
         self.state_variables: tuple[str, ...] = tuple(framed)
+        # vector-valued variables (the common case) concatenate without a reshape per step
+        self.has_nonvector_state = any(len(self.shapes[var]) != 1 for var in framed)
         self.has_action = window.action in self.shapes
         if self.has_action:
             framed.append(window.action)
+        self.vector_action = self.has_action and len(self.shapes[window.action]) == 1
         self.widths = widths
         self.frame_offsets: dict[str, int] = {}
         offset = 0
@@ -105,6 +108,58 @@ class WindowLayout:
             lows.append(low)
             highs.append(high)
         return torch.cat(lows, -1), torch.cat(highs, -1)
+
+
+class LagRing:
+    """The last ``k + 1`` frames of every env of a batch, in one preallocated tensor.
+
+    The current step sits in slot ``slot`` and the frame ``lag`` steps back in slot
+    ``(slot - lag) mod (k + 1)``, so a step moves a pointer instead of the data. All envs
+    of a batch step together, hence one pointer; a reset zeroes the rows of its envs.
+    Per-slot views are built once so that the step path is a few ``copy_`` calls and one
+    ``index_select``.
+
+    Args:
+        layout: the window layout.
+        states: ``[*batch, state_width]`` first states of every env.
+    """
+
+    __slots__ = ("frames", "slot", "action_shape", "_num_slots", "_state_width", "_flat", "_states", "_actions", "_index")
+
+    def __init__(self, layout: WindowLayout, states: torch.Tensor) -> None:
+        batch = states.shape[:-1]
+        self.frames = states.new_zeros((*batch, layout.num_slots, layout.frame_width))
+        self._num_slots = layout.num_slots
+        self._state_width = layout.state_width
+        self._flat = self.frames.flatten(-2)
+        self._states = tuple(self.frames[..., s, : layout.state_width] for s in range(layout.num_slots))
+        self._actions = tuple(self.frames[..., s, layout.state_width :] for s in range(layout.num_slots))
+        self._index = tuple(layout.ring_index().to(states.device).unbind(0))
+        self.action_shape = self._actions[0].shape
+        self.slot = 0
+        self._states[0].copy_(states)
+
+    @property
+    def batch_size(self) -> torch.Size:
+        return self.frames.shape[:-2]
+
+    def reset(self, states: torch.Tensor, mask: torch.Tensor) -> None:
+        """Starts a new episode in the envs selected by the boolean ``mask`` (batch-shaped)."""
+        self.frames[mask] = 0
+        self.frames[mask, self.slot, : self._state_width] = states[mask].to(self.frames.dtype)
+
+    def record_action(self, action: torch.Tensor) -> None:
+        """Stores the action taken at the current step (``[*batch, action_width]``)."""
+        self._actions[self.slot].copy_(action)
+
+    def advance(self, states: torch.Tensor) -> None:
+        """Moves to the next step, whose states are ``[*batch, state_width]``."""
+        self.slot = (self.slot + 1) % self._num_slots
+        self._states[self.slot].copy_(states)
+
+    def encode(self) -> torch.Tensor:
+        """``[*batch, num_features]``: the current encoding."""
+        return self._flat.index_select(-1, self._index[self.slot])
 
 
 def spec_bounds(spec: TensorSpec, batch_ndim: int, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor] | None:

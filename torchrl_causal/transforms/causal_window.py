@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -13,7 +14,7 @@ from torchrl.envs import EnvBase, Transform
 from torchrl.envs.transforms.utils import _get_reset
 
 from torchrl_causal.graphs.window import AdjustmentWindow
-from torchrl_causal.transforms._layout import FeatureSlice, WindowLayout, spec_bounds
+from torchrl_causal.transforms._layout import FeatureSlice, LagRing, WindowLayout, spec_bounds
 
 __all__ = ["CausalWindowTransform"]
 
@@ -60,7 +61,7 @@ class CausalWindowTransform(Transform):
         check_nan: raise, naming the variable, when the encoding contains a NaN (one
             reduction per step). Defaults to ``True``.
         chunk_size: rows encoded at once by :meth:`encode_trajectories`, bounding its
-            temporary memory. Defaults to ``8192``.
+            temporary memory. Defaults to ``2048``.
 
     Examples:
         >>> import torch
@@ -99,7 +100,7 @@ class CausalWindowTransform(Transform):
         out_key: NestedKey = "observation",
         action_key: NestedKey = "action",
         check_nan: bool = True,
-        chunk_size: int = 8192,
+        chunk_size: int = 2048,
     ) -> None:
         if not isinstance(window, AdjustmentWindow):
             raise TypeError(f"window must be an AdjustmentWindow, got {type(window).__name__}")
@@ -122,9 +123,7 @@ class CausalWindowTransform(Transform):
         self.hidden_keys: tuple[NestedKey, ...] = (LATENT_KEY, *sorted(window.excluded))
         self._layout: WindowLayout | None = None
         self._dtype: torch.dtype | None = None
-        self._ring_index: torch.Tensor | None = None
-        self._history: torch.Tensor | None = None
-        self._slot = 0
+        self._ring: LagRing | None = None
 
     # ------------------------------------------------------------------ construction
 
@@ -219,8 +218,7 @@ class CausalWindowTransform(Transform):
                     )
         if self._layout is None:
             self._layout = WindowLayout(self.window, shapes)
-            self._ring_index = self._layout.ring_index()
-            self._history = None
+            self._ring = None
         if dtype is not None:
             self._dtype = dtype
         return self._layout
@@ -284,20 +282,17 @@ class CausalWindowTransform(Transform):
         batch = tensordict_reset.batch_size
         states = self._read_states(tensordict_reset, batch, layout)
         reset = _get_reset(self.reset_key, tensordict)
-        history = self._history
-        if history is None or history.shape[:-2] != batch or bool(reset.all()):
-            history = self._history = states.new_zeros((*batch, layout.num_slots, layout.frame_width))
-            self._slot = 0
-            history[..., 0, : layout.state_width] = states
+        ring = self._ring
+        if ring is None or ring.batch_size != batch or bool(reset.all()):
+            ring = self._ring = LagRing(layout, states.to(self._dtype))
         else:
-            history[reset] = 0
-            history[reset, self._slot, : layout.state_width] = states[reset]
-        tensordict_reset.set(self.out_key, self._encode_ring(history))
+            ring.reset(states, reset)
+        tensordict_reset.set(self.out_key, self._encode(ring))
         return tensordict_reset.exclude(*self.hidden_keys, inplace=True)
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
-        history = self._history
-        if history is None:
+        ring = self._ring
+        if ring is None:
             raise RuntimeError(f"{type(self).__name__}: reset the env before stepping it")
         layout = self._layout
         batch = next_tensordict.batch_size
@@ -305,24 +300,27 @@ class CausalWindowTransform(Transform):
             action = tensordict.get(self.action_key, None)
             if action is None:
                 raise KeyError(f"the action key {self.action_key!r} is missing from the step's input")
-            try:
-                history[..., self._slot, layout.state_width :] = action.reshape(*batch, -1)
-            except RuntimeError:
+            if not layout.vector_action:
+                action = action.reshape(*batch, -1)
+            if action.shape != ring.action_shape:  # copy_ would broadcast a wrong shape silently
                 self._raise_shape_error(tensordict, batch, (self.window.action,))
-        self._slot = (self._slot + 1) % layout.num_slots
-        history[..., self._slot, : layout.state_width] = self._read_states(next_tensordict, batch, layout)
-        next_tensordict.set(self.out_key, self._encode_ring(history))
+            ring.record_action(action)
+        ring.advance(self._read_states(next_tensordict, batch, layout))
+        next_tensordict.set(self.out_key, self._encode(ring))
         return next_tensordict.exclude(*self.hidden_keys, inplace=True)
 
-    def _encode_ring(self, history: torch.Tensor) -> torch.Tensor:
-        encoding = history.flatten(-2).index_select(-1, self._ring_index[self._slot])
-        self._check_nan(encoding)
+    def _encode(self, ring: LagRing) -> torch.Tensor:
+        encoding = ring.encode()
+        if self.check_nan:
+            self._check_nan(encoding)
         return encoding
 
     def _read_states(self, tensordict: TensorDictBase, batch: torch.Size, layout: WindowLayout) -> torch.Tensor:
         """``[*batch, state_width]``: the admissible state variables of one step, flattened."""
         try:
-            values = [tensordict.get(var).reshape(*batch, -1) for var in layout.state_variables]
+            values = [tensordict.get(var) for var in layout.state_variables]
+            if layout.has_nonvector_state:
+                values = [value.reshape(*batch, -1) for value in values]
             states = torch.cat(values, -1) if len(values) != 1 else values[0]
             if states.shape[-1] != layout.state_width:
                 raise RuntimeError
@@ -331,7 +329,7 @@ class CausalWindowTransform(Transform):
             raise KeyError(f"admissible keys {missing} are missing from the env's output") from None
         except RuntimeError:
             self._raise_shape_error(tensordict, batch, layout.state_variables)
-        return states.to(self._dtype)
+        return states
 
     def _raise_shape_error(self, tensordict: TensorDictBase, batch: torch.Size, variables: Sequence[str]) -> None:
         for var in variables:
@@ -342,10 +340,25 @@ class CausalWindowTransform(Transform):
                 raise ValueError(f"shape mismatch for key {key!r}: expected {expected}, got {got}")
         raise RuntimeError(f"could not encode {list(variables)} from {tensordict}")
 
+    def _check_frames_nan(self, frames: torch.Tensor, layout: WindowLayout) -> None:
+        nan_columns = torch.isnan(frames).any(0).nonzero()
+        if nan_columns.numel():
+            column = int(nan_columns[0])
+            var = next(v for v, offset in layout.frame_offsets.items() if offset <= column < offset + layout.widths[v])
+            raise ValueError(
+                f"NaN in admissible key {self._variable_key(var)!r}; refusing to encode it for the policy "
+                "(check_nan=False disables this check)"
+            )
+
     def _check_nan(self, encoding: torch.Tensor) -> None:
-        if not self.check_nan or not bool(torch.isnan(encoding).any()):
+        # One reduction per step: a NaN makes the sum NaN (so does inf - inf, hence the
+        # exact look that follows before raising).
+        if not math.isnan(encoding.sum()):
             return
-        column = int(torch.isnan(encoding).reshape(-1, encoding.shape[-1]).any(0).nonzero()[0])
+        nan_columns = torch.isnan(encoding).reshape(-1, encoding.shape[-1]).any(0).nonzero()
+        if not nan_columns.numel():
+            return
+        column = int(nan_columns[0])
         feature = next(f for f in self._layout.features if f.columns.start <= column < f.columns.stop)
         raise ValueError(
             f"NaN in admissible key {self._variable_key(feature.variable)!r} at lag {feature.lag}; "
@@ -384,25 +397,33 @@ class CausalWindowTransform(Transform):
         frames = self._padded_frames(flat, layout)
         next_states = self._read_states(flat.get("next"), flat.batch_size, layout)
 
-        k = self.window.k
+        if self.check_nan:
+            self._check_frames_nan(frames, layout)
+            self._check_frames_nan(next_states, layout)
+        k, width = self.window.k, layout.frame_width
         lag, column = layout.feature_lag, layout.feature_column
+        # Row i of `windows` (below) is frames i-k..i flattened, oldest first: the frame
+        # `lag` steps back starts at (k - lag) * width. At t + 1 the frame `lag` steps back
+        # is one row later; its lag-0 columns are the next states, written separately.
+        position = (k - lag) * width + column
+        next_position = (k - (lag - 1).clamp(min=0)) * width + column
         current = (lag == 0).nonzero().squeeze(-1)
         current_columns = column[current]
-        position, next_position = k - lag, (k + 1 - lag).clamp(max=k)
-        n, zero = flat.numel(), frames.new_zeros(())
+        n = flat.numel()
         encoding = frames.new_empty((n, layout.num_features))
         next_encoding = frames.new_empty((n, layout.num_features))
         for start in range(0, n, self.chunk_size):
             stop = min(start + self.chunk_size, n)
-            # windows[i, :, m] is the frame of row start + i - k + m (rows before 0 are zero)
-            windows = frames[start : stop + k].unfold(0, k + 1, 1)
-            step = steps[start:stop, None]
-            torch.where(step >= lag, windows[:, column, position], zero, out=encoding[start:stop])
-            # at t + 1 the frame `lag` steps back is row i - lag + 1; lag 0 is the next state
-            torch.where(step >= lag - 1, windows[:, column, next_position], zero, out=next_encoding[start:stop])
+            windows = frames.view(-1)[start * width :].as_strided((stop - start, (k + 1) * width), (width, 1))
+            torch.index_select(windows, 1, position, out=encoding[start:stop])
+            torch.index_select(windows, 1, next_position, out=next_encoding[start:stop])
             next_encoding[start:stop, current] = next_states[start:stop, current_columns]
-            self._check_nan(encoding[start:stop])
-            self._check_nan(next_encoding[start:stop])
+            # Only the first k steps of an episode reach back before its start: zero-pad those.
+            early = (steps[start:stop] < k).nonzero().squeeze(-1) + start
+            if early.numel():
+                step = steps[early, None]
+                encoding[early] = encoding[early].masked_fill_(step < lag, 0)
+                next_encoding[early] = next_encoding[early].masked_fill_(step < lag - 1, 0)
 
         hidden = [*self.hidden_keys, *(("next", key) for key in self.hidden_keys)]
         out = trajectories.exclude(*hidden)
@@ -445,7 +466,7 @@ class CausalWindowTransform(Transform):
         """``[k + N, frame_width]``: every row's frame after ``k`` zero rows."""
         k, n = self.window.k, flat.numel()
         states = self._read_states(flat, flat.batch_size, layout)
-        frames = states.new_zeros((k + n, layout.frame_width))
+        frames = torch.zeros((k + n, layout.frame_width), dtype=self._dtype, device=states.device)
         frames[k:, : layout.state_width] = states
         if layout.has_action:
             action = flat.get(self.action_key)
