@@ -341,6 +341,9 @@ class MujocoMazeEnv(GustConfoundedEnv):
         self._goal_xy = self.simulator.cell_xy(self.task.goal_cell)
         self._start_xy = self.simulator.cell_xy(self.task.start_cell)
         self._state = np.zeros((self.simulator.num_envs, self.state_width))
+        columns = self.variable_columns.items()
+        self._observed_columns = [(name, cols) for name, cols in columns if name not in self.latent_variables]
+        self._latent_columns = [(name, cols) for name, cols in columns if name in self.latent_variables]
         self._action_low = torch.as_tensor(model.actuator_ctrlrange[:, 0], dtype=torch.float32)
         self._action_high = torch.as_tensor(model.actuator_ctrlrange[:, 1], dtype=torch.float32)
         super().__init__(
@@ -411,19 +414,15 @@ class MujocoMazeEnv(GustConfoundedEnv):
         state = self._state
         for data, row in zip(self.simulator.datas, state):
             self._read_state(data, row)
-        position = state[:, self.variable_columns["P"].start :][:, :2]
-        distance = np.hypot(*(position - self._goal_xy).T)
+        x, y = self.variable_columns["P"].start, self.variable_columns["P"].start + 1
+        distance = np.hypot(state[:, x] - self._goal_xy[0], state[:, y] - self._goal_xy[1])
         success = torch.from_numpy(distance <= self.success_radius).to(self.device).reshape(self._success.shape)
         return reward, success
 
     def _observation(self) -> dict[str, object]:
         state = self._torch(self._state)
-        observation: dict[str, object] = {
-            name: state[..., columns]
-            for name, columns in self.variable_columns.items()
-            if name not in self.latent_variables
-        }
-        observation["latent"] = {name: state[..., self.variable_columns[name]] for name in self.latent_variables}
+        observation: dict[str, object] = {name: state[..., columns] for name, columns in self._observed_columns}
+        observation["latent"] = {name: state[..., columns] for name, columns in self._latent_columns}
         observation["W"] = self.read_compass(self._torch(self._sensor_signal(self._state)))
         observation.update(self.scm_observation())
         return observation
