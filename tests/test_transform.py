@@ -19,7 +19,7 @@ from torchrl.data import Bounded, Composite, Unbounded
 from torchrl.envs import Compose, EnvBase, InitTracker, SerialEnv, TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
-from torchrl_causal.graphs.window import AdjustmentWindow
+from torchrl_causal.graphs import AdjustmentWindow, TimeSliceTemplate
 from torchrl_causal.transforms import CausalWindowTransform
 
 # --------------------------------------------------------------------------- tiny env
@@ -99,6 +99,17 @@ class CountingEnv(EnvBase):
 
     def _set_seed(self, seed: int | None) -> None:
         """Deterministic env."""
+
+    @property
+    def causal_template(self) -> TimeSliceTemplate:
+        """P and V drive P, the reward's parent; the latent O drives X and the collider W."""
+        return TimeSliceTemplate(
+            variables=("P", "V", "O", "W", "X"),
+            action="X",
+            observed=("P", "V", "W", "X"),
+            directed=(("P", "P", 1), ("V", "P", 1), ("X", "P", 1), ("V", "V", 1), ("O", "X", 0), ("O", "W", 0)),
+            reward_parents=("P",),
+        )
 
 
 # --------------------------------------------------------------------------- windows and reference
@@ -262,21 +273,47 @@ def test_forward_encodes_like_encode_trajectories_and_hides_keys():
 # --------------------------------------------------------------------------- specs and batched envs
 
 
-@pytest.mark.parametrize("window", [CAUSAL, NONCAUSAL, MATCHED], ids=["causal", "noncausal", "matched"])
-def test_check_env_specs_and_exact_bounds(window):
-    env = TransformedEnv(CountingEnv([2, 3, 4, 5]), CausalWindowTransform(window))
+FROM_ENV_MODES = {
+    "causal": ({"causal": True}, {"P": (0, 1, 2), "V": (0, 1, 2), "X": (1, 2)}),
+    "noncausal": ({"causal": False}, {"P": (0,), "V": (0,), "W": (0,), "X": (1,)}),
+    "matched": ({"causal": False, "window_matched": True}, {"P": (0, 1, 2), "V": (0, 1, 2), "W": (0, 1, 2), "X": (1, 2)}),
+}
+
+
+@pytest.mark.parametrize("mode", list(FROM_ENV_MODES))
+def test_from_env_windows_pass_check_env_specs_with_exact_bounds(mode):
+    kwargs, lags = FROM_ENV_MODES[mode]
+    base = CountingEnv([2, 3, 4, 5])
+    transform = CausalWindowTransform.from_env(base, K, **kwargs)
+    assert dict(transform.window.lags) == lags and list(transform.window.lags) == list(lags)
+    env = TransformedEnv(base, transform)
     check_env_specs(env)
     spec = env.observation_spec["observation"]
-    layout = env.transform.feature_layout()
-    assert spec.shape == (4, layout[-1].columns.stop) and spec.dtype == torch.float32
+    layout = transform.feature_layout()
+    assert spec.shape == (4, sum(f.columns.stop - f.columns.start for f in layout)) and spec.dtype == torch.float32
     for feature in layout:
-        low, high = spec.space.low[0, feature.columns], spec.space.high[0, feature.columns]
-        if feature.variable == "P":
-            assert low.tolist() == [0.0 if feature.lag else 1.0] * 2 and high.tolist() == [1000.0] * 2
-        if feature.variable == "V":
+        low, high = spec.space.low[:, feature.columns], spec.space.high[:, feature.columns]
+        if feature.variable == "P":  # P's spec is [1, 1000]; zero padding widens the lagged copies
+            assert (low == (0.0 if feature.lag else 1.0)).all() and (high == 1000.0).all()
+        elif feature.variable == "V":  # unbounded
             assert torch.isinf(low).all() and torch.isinf(high).all()
-    assert "W" in env.observation_spec.keys() if "W" in window.lags else "W" not in env.observation_spec.keys()
+        elif feature.variable == "W":
+            assert (low == (0.0 if feature.lag else 1000.0)).all() and (high == 2000.0).all()
+        else:  # the action: [-1000, 1000] contains 0 already
+            assert (low == -1000.0).all() and (high == 1000.0).all()
+    assert ("W" in env.observation_spec.keys()) is ("W" in lags)
     assert "latent" not in env.observation_spec.keys()
+
+
+def test_from_env_refuses_window_matched_causal_and_envs_without_template():
+    with pytest.raises(ValueError, match="window_matched"):
+        CausalWindowTransform.from_env(CountingEnv([3]), 2, causal=True, window_matched=True)
+
+    class NoTemplateEnv(CountingEnv):
+        causal_template = None
+
+    with pytest.raises(AttributeError, match="NoTemplateEnv exposes no causal_template"):
+        CausalWindowTransform.from_env(NoTemplateEnv([3]), 2)
 
 
 def test_serial_env_of_transformed_envs_and_transformed_serial_env():
