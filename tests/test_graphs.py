@@ -186,7 +186,7 @@ def test_pa_plus_example_no_window_suffices(k):
         assert sequential_pi_backdoor(g, actions, "Y", width_k_family(horizon, k)).holds is expected
     influence = check_bounded_influence(PA_PLUS_TEMPLATE, k)
     assert not influence.bounded and not influence.holds
-    assert "every k" in influence.message
+    assert "every k" in influence.message and "<->" in influence.chain_text
     with pytest.raises(BoundedInfluenceError, match="every k"):
         windowed_adjustment(PA_PLUS_TEMPLATE, k)
 
@@ -274,6 +274,39 @@ def test_variant_full_horizon_sets_pass(name):
     result = exact_adjustment(imitable, 6)
     assert set(result.actions) <= result.ox
     assert sequential_pi_backdoor(imitable.unroll(6), result.actions, "Y", result.family).holds
+
+
+def test_theorem_1_counterexample():
+    # Assumption 1 holds for k = 2, but x's lag-2 effect leaves the proxy's last action
+    # without a path to Y, so Algorithm 1's shifted sets (and the window) fail later on.
+    template = TimeSliceTemplate(
+        variables=("a", "b", "c", "x"),
+        action="x",
+        observed=("a", "b", "c", "x"),
+        directed=[("b", "x", 0), ("x", "b", 1), ("a", "a", 2), ("a", "b", 0), ("a", "c", 0),
+                  ("b", "b", 1), ("c", "b", 2), ("x", "a", 2)],
+        reward_parents=("c",),
+        reward_slices="last",
+    )
+    k, horizon = 2, 7
+    assert check_bounded_influence(template, k).holds
+    proxy = exact_adjustment(template, k + 1)
+    assert proxy.adjustment_set(("x", k)) == set()
+    shifted = {
+        ("x", t): proxy.adjustment_set(("x", t)) if t <= k
+        else {(v, s + t - k) for v, s in proxy.adjustment_set(("x", k))}  # type: ignore[misc]
+        for t in range(horizon)
+    }
+    g = template.unroll(horizon)
+    assert not sequential_pi_backdoor(g, actions_of(template, horizon), "Y", shifted).holds
+    full = exact_adjustment(template, horizon)  # the full horizon is imitable all the same
+    assert sequential_pi_backdoor(g, full.actions, "Y", full.family).holds
+    with pytest.raises(NotImitableError, match="fixed window .* is not admissible"):
+        windowed_adjustment(template, k)
+    window = windowed_adjustment(template, k + 1)
+    for h in (k + 2, 3 * k + 8):
+        family = window_family(window, "x", h)
+        assert sequential_pi_backdoor(template.unroll(h), actions_of(template, h), "Y", family).holds
 
 
 def test_bounded_influence_of_templates():

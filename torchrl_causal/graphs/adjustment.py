@@ -8,10 +8,16 @@ Decisions where the paper is ambiguous (each verified by the tests):
   state variables at lags ``0..k`` and the action at ``1..k`` (lag 0 = current step);
   these are exactly the observed nodes of the horizon-``(k+1)`` proxy that precede its
   last action.
-* Non-boundary actions get the empty set in Algorithm 1 (line 8), whereas a window
-  conditions every step on the same lags. Exact mode therefore re-checks the window's own
-  family against Definition 2 on the proxy and on a horizon-``(3k+3)`` diagram and refuses
-  (``NotImitableError``) if the fixed-lag window is not admissible.
+* Theorem 1 does not hold as stated. Non-boundary actions get the empty set in
+  Algorithm 1 (line 8) whereas a window conditions every step on the same lags, and,
+  worse, the horizon-``(k+1)`` proxy cuts the effects of its last action that take more
+  than one step: with ``x -> a`` at lag 2, ``a -> a`` at lag 2 and the reward at the end,
+  Assumption 1 holds for k = 2, yet the proxy's last action is no ancestor of ``Y``, gets
+  ``Z = ∅``, and both the transferred Algorithm-1 sets and the window fail Definition 2
+  at H = 7 (``tests/test_graphs.py::test_theorem_1_counterexample``). Exact mode
+  therefore re-checks the window's own family against Definition 2 on the proxy and on a
+  horizon-``(3k+3)`` diagram and refuses (``NotImitableError``) when it is not admissible.
+  On random templates no window that passes these two checks failed up to H = 6k + 10.
 * The reward at every slice (``reward_slices="all"``) makes ``pa(Y)`` reach back to
   ``t = 0``: with ``Y`` in the last slice, as Assumption 1 states, such templates never
   satisfy it, so exact windows need ``reward_slices="last"``.
@@ -24,7 +30,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Literal
 
-from .criteria import _AncestralView, _check_action, _find_ox_map, sequential_pi_backdoor
+from .criteria import _AncestralView, _find_ox_map, _ManipulatedGraph, sequential_pi_backdoor
 from .diagram import CausalDiagram
 from .errors import BoundedInfluenceError, GraphError, NotImitableError
 from .template import REWARD, TimeSliceTemplate
@@ -99,9 +105,14 @@ def _relaxed_witness(
     def prefix(x: int) -> set[int]:
         return {v for v in observed_ancestors if rank[v] < rank[x]}
 
+    graph = _ManipulatedGraph(g)
+    later = iter(sorted(actions, key=rank.__getitem__, reverse=True))
+    nxt = next(later, None)
     for x in sorted(candidates, key=rank.__getitem__, reverse=True):
-        future = {f: prefix(f) for f in actions if rank[f] > rank[x]}
-        _, path = _check_action(g, x, prefix(x), future, view.reward)
+        while nxt is not None and rank[nxt] > rank[x]:
+            graph.make_future(nxt, prefix(nxt))
+            nxt = next(later, None)
+        _, path = graph.check(x, prefix(x), view.reward)
         if path is not None:
             return tuple(g._nodes[v] for v in path)
     return ()
@@ -181,12 +192,14 @@ class BoundedInfluence:
         chain: for the farthest-reaching node, the path in the latent projection that makes
             its extended parent so early (bidirected steps within its C-component, then the
             last edge into the extended parent).
+        chain_text: the chain with its edges (``<->``, ``<-``, ``->``).
         horizon: the horizon of the unrolled diagram the chain comes from.
     """
 
     k: int | None
     required_k: int | None
     chain: tuple[Node, ...]
+    chain_text: str
     horizon: int
 
     @property
@@ -200,7 +213,7 @@ class BoundedInfluence:
 
     @property
     def message(self) -> str:
-        chain = " ~ ".join(map(repr, self.chain))
+        chain = self.chain_text
         if self.required_k is None:
             return (
                 "extended parents reach arbitrarily far back, so Assumption 1(i) fails for every k; "
@@ -249,6 +262,16 @@ def _farthest_extended_parent(projection: CausalDiagram, horizon: int) -> tuple[
     return lag, _extended_parent_chain(g, v, far)
 
 
+def _chain_text(g: CausalDiagram, chain: tuple[Node, ...]) -> str:
+    if len(chain) == 1:
+        return repr(chain[0])
+    parts = [repr(chain[0])]
+    for a, b in zip(chain, chain[1:]):
+        parts.append("<->" if b in g.spouses(a) else "<-" if b in g.parents(a) else "->")
+        parts.append(repr(b))
+    return " ".join(parts)
+
+
 def _extended_parent_chain(g: CausalDiagram, v: int, far: int) -> tuple[Node, ...]:
     """Bidirected path from ``v`` through its predecessors to a member that is ``far`` or a
     child of ``far``, then ``far``."""
@@ -272,7 +295,7 @@ def _extended_parent_chain(g: CausalDiagram, v: int, far: int) -> tuple[Node, ..
 
 
 @lru_cache(maxsize=128)
-def _influence_bound(template: TimeSliceTemplate) -> tuple[int | None, tuple[Node, ...], int]:
+def _influence_bound(template: TimeSliceTemplate) -> tuple[int | None, tuple[Node, ...], str, int]:
     # Without a repeated variable, a latent-interior edge spans at most (latent+1)*L steps
     # and a C-component chain at most (variables) such edges; a repeat can be pumped, and
     # then the requirement grows with the horizon. Comparing two horizons past that bound
@@ -280,9 +303,10 @@ def _influence_bound(template: TimeSliceTemplate) -> tuple[int | None, tuple[Nod
     lag = max(template.max_lag, 1)
     short = (len(template.variables) + 1) * (len(template.latent) + 1) * lag + 2
     long = 2 * short + 1
-    r_short, chain = _farthest_extended_parent(template.unroll(short).latent_projection(), short)
+    projection = template.unroll(short).latent_projection()
+    r_short, chain = _farthest_extended_parent(projection, short)
     r_long, _ = _farthest_extended_parent(template.unroll(long).latent_projection(), long)
-    return (None if r_long > r_short else r_short), chain, short
+    return (None if r_long > r_short else r_short), chain, _chain_text(projection, chain), short
 
 
 def check_bounded_influence(template: TimeSliceTemplate, k: int | None = None) -> BoundedInfluence:
@@ -304,8 +328,8 @@ def check_bounded_influence(template: TimeSliceTemplate, k: int | None = None) -
     """
     if k is not None:
         _check_k(k)
-    required, chain, horizon = _influence_bound(template)
-    return BoundedInfluence(k=k, required_k=required, chain=chain, horizon=horizon)
+    required, chain, chain_text, horizon = _influence_bound(template)
+    return BoundedInfluence(k=k, required_k=required, chain=chain, chain_text=chain_text, horizon=horizon)
 
 
 # ---------------------------------------------------------------------- windows
@@ -384,7 +408,9 @@ def windowed_adjustment(
         if open_paths:
             raise NotImitableError(
                 f"Algorithm 1's sets exist for k={k}, but the fixed window {dict(window.lags)} is not "
-                f"admissible at horizon {horizon}: {' ~ '.join(map(repr, open_paths[0]))} stays open",
+                f"admissible at horizon {horizon}: {' ~ '.join(map(repr, open_paths[0]))} stays open "
+                "(the horizon-(k+1) proxy cuts effects of its last action that take longer than one "
+                "step; try a larger k, or exact_adjustment for the full horizon)",
                 actions=[path[0] for path in open_paths],
                 witness=open_paths[0],
             )

@@ -50,33 +50,48 @@ def _action_ids(diagram: CausalDiagram, actions: Iterable[Node]) -> list[int]:
     return sorted(ids, key=diagram._rank.__getitem__)
 
 
-def _check_action(
-    diagram: CausalDiagram, x: int, z: set[int], future: Mapping[int, set[int]], reward: int
-) -> tuple[str, list[int] | None]:
-    """Definition 2 for one action ``x`` given its set ``z`` and the sets of later actions.
+class _ManipulatedGraph:
+    """``G'_t`` built incrementally, latest action first.
 
-    Builds ``G'_t`` by copying only the adjacency entries the manipulation touches: later
-    actions lose every incoming edge (directed and bidirected: under ``do(pi)`` they
-    respond to their adjustment sets alone) and get their sets as parents.
+    Going backwards in time, each action in turn becomes a "future" action: it loses every
+    incoming edge (directed and bidirected: under ``do(pi)`` it responds to its adjustment
+    set alone) and gets its set as parents. Each step costs the degree of one action, so
+    checking all ``H`` actions costs ``H`` searches and no graph copies.
     """
-    pa, ch, sp = list(diagram._pa), list(diagram._ch), list(diagram._sp)
-    for f in future:
-        for p in diagram._pa[f]:
-            ch[p] = tuple(c for c in ch[p] if c not in future)
-        for s in diagram._sp[f]:
-            sp[s] = tuple(u for u in sp[s] if u not in future)
-    for f, zf in future.items():
-        pa[f] = tuple(zf)
-        sp[f] = ()
-        for p in zf:
-            ch[p] = ch[p] + (f,)
-    if reward not in _ancestor_ids(ch, [x]):
-        return "not_ancestor", None
-    for c in ch[x]:
-        pa[c] = tuple(p for p in pa[c] if p != x)
-    ch[x] = ()
-    path = _find_open_path(pa, ch, sp, [x], z.__contains__, _ancestor_ids(pa, z).__contains__, reward.__eq__)
-    return ("separated", None) if path is None else ("open_path", path)
+
+    def __init__(self, diagram: CausalDiagram) -> None:
+        self.pa = [list(p) for p in diagram._pa]
+        self.ch = [list(c) for c in diagram._ch]
+        self.sp = [list(s) for s in diagram._sp]
+
+    def make_future(self, action: int, adjustment: Iterable[int]) -> None:
+        pa, ch, sp = self.pa, self.ch, self.sp
+        for p in pa[action]:
+            ch[p].remove(action)
+        for s in sp[action]:
+            sp[s].remove(action)
+        pa[action] = list(adjustment)
+        sp[action] = []
+        for z in pa[action]:
+            ch[z].append(action)
+
+    def check(self, x: int, z: set[int], reward: int) -> tuple[str, list[int] | None]:
+        """Definition 2 for ``x`` (every later action already made future)."""
+        pa, ch, sp = self.pa, self.ch, self.sp
+        if reward not in _ancestor_ids(ch, [x]):
+            return "not_ancestor", None
+        children, ch[x] = ch[x], []
+        for c in children:
+            pa[c].remove(x)
+        try:
+            path = _find_open_path(
+                pa, ch, sp, [x], z.__contains__, _ancestor_ids(pa, z).__contains__, reward.__eq__
+            )
+        finally:
+            ch[x] = children
+            for c in children:
+                pa[c].append(x)
+        return ("separated", None) if path is None else ("open_path", path)
 
 
 def _adjustment_ids(
@@ -138,11 +153,15 @@ def sequential_pi_backdoor(
     names = diagram._nodes
     reasons: dict[Node, str] = {}
     witnesses: dict[Node, tuple[Node, ...]] = {}
-    for i, x in enumerate(action_ids):
-        reason, path = _check_action(diagram, x, sets[x], {f: sets[f] for f in action_ids[i + 1 :]}, y)
+    graph = _ManipulatedGraph(diagram)
+    for x in reversed(action_ids):
+        reason, path = graph.check(x, sets[x], y)
         reasons[names[x]] = reason
         if path is not None:
             witnesses[names[x]] = tuple(names[v] for v in path)
+        graph.make_future(x, sets[x])
+    reasons = {names[x]: reasons[names[x]] for x in action_ids}
+    witnesses = {names[x]: witnesses[names[x]] for x in action_ids if names[x] in witnesses}
     return BackdoorReport(holds=not witnesses, reasons=reasons, witnesses=witnesses)
 
 
