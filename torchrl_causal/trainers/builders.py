@@ -129,21 +129,30 @@ def make_expert(cfg: DictConfig, env: EnvBase) -> Callable[[TensorDictBase], Ten
     return target(env, **kwargs)
 
 
-def load_or_collect_demonstrations(cfg: DictConfig, progress: bool = False) -> TensorDictBase:
+def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
     """Loads the demonstration set at ``cfg.demos.path``, collecting it with the expert first
     if it does not exist yet (train regime, ``cfg.demos.episodes`` episodes).
 
-    Collection is atomic (see :func:`~torchrl_causal.data.collect_demonstrations`), so runs
-    started side by side may both collect, and one of the identical sets wins.
+    The set must have been recorded in this config's train-regime env (same maze,
+    horizon, strength): :func:`~torchrl_causal.data.load_demonstrations` refuses others.
+    Collection is atomic, so runs started side by side may both collect; one identical
+    set wins and the other run loads it.
     """
     from torchrl_causal.data import collect_demonstrations, load_demonstrations
 
     path = Path(cfg.demos.path)
+    reference = make_env(cfg, "train", 1, int(cfg.demos.seed))
     if not path.exists():
         episodes = int(cfg.demos.episodes)
         env = make_env(cfg, "train", min(episodes, 64), int(cfg.demos.seed))
-        collect_demonstrations(env, make_expert(cfg, env), episodes, path)
-    return load_demonstrations(path)
+        try:
+            collect_demonstrations(env, make_expert(cfg, env), episodes, path, seed=int(cfg.demos.seed),
+                                   progress=bool(cfg.progress_bar))
+        except FileExistsError:
+            pass  # another run finished collecting the same set first
+        finally:
+            env.close()
+    return load_demonstrations(path, expected=reference)
 
 
 def expert_transitions(window: AdjustmentWindow, demonstrations: TensorDictBase) -> TensorDict:

@@ -122,7 +122,8 @@ class GAILTrainer(Trainer):
         if self.collector is None:
             self.env.set_seed(int(self.cfg.seed) * 1_000_003 + self.progress)
             frames = int(algo.episodes_per_round) * int(self.cfg.env.horizon)
-            self.collector = iter(Collector(self.env, self.policy, frames_per_batch=frames, total_frames=-1, device="cpu"))
+            self.collector = iter(Collector(self.env, self.policy, frames_per_batch=frames, total_frames=-1, device="cpu",
+                                            auto_register_policy_transforms=False))
         rollout = next(self.collector)  # [episodes_per_round, horizon], time last
         scalars = {"train/env_reward_per_step": rollout["next", "reward"].mean().item(),
                    "train/loss_discriminator": self._update_discriminator(rollout.reshape(-1))}

@@ -122,7 +122,7 @@ class OffPolicyILTrainer(Trainer):
         return Collector(
             self.env, self.policy, frames_per_batch=frames, total_frames=-1,
             init_random_frames=math.ceil(remaining_random / frames) * frames if remaining_random else None,
-            device="cpu",
+            device="cpu", auto_register_policy_transforms=False,
         )
 
     def train_step(self) -> Mapping[str, float]:
