@@ -25,7 +25,7 @@ Decisions where the paper is ambiguous (each verified by the tests):
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Iterable, Mapping
+from collections.abc import Hashable, Iterable
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Literal
