@@ -33,30 +33,38 @@ FAST = settings(max_examples=40, deadline=None, suppress_health_check=[HealthChe
 
 
 # ---------------------------------------------------------------------- independent helpers
-def marks(diagram: CausalDiagram, a, b) -> tuple[bool, bool]:
-    """(arrowhead at a, arrowhead at b) for the edge between a and b used by a path."""
+def edge_marks(diagram: CausalDiagram, a, b) -> set[tuple[bool, bool]]:
+    """(arrowhead at a, arrowhead at b) for every edge between a and b (parallel edges allowed)."""
+    options = set()
     if b in diagram.spouses(a):
-        return True, True
+        options.add((True, True))
     if b in diagram.children(a):
-        return False, True
+        options.add((False, True))
     if a in diagram.children(b):
-        return True, False
-    raise AssertionError(f"{a!r} and {b!r} are not adjacent")
+        options.add((True, False))
+    assert options, f"{a!r} and {b!r} are not adjacent"
+    return options
 
 
 def is_open_path(diagram: CausalDiagram, path, given) -> bool:
-    """Textbook d-connection of a single simple path (colliders in An(Z), others not in Z)."""
+    """Textbook d-connection of a simple path (colliders in An(Z), others not in Z), choosing
+    among parallel edges (e.g. ``a -> b`` and ``a <-> b``) by dynamic programming."""
     if len(set(path)) != len(path):
         return False
     nxg = diagram.to_networkx()
     ancestors_of_given = set(given).union(*(nx.ancestors(nxg, z) for z in given))
-    for prev, node, nxt in zip(path, path[1:], path[2:]):
-        collider = marks(diagram, prev, node)[1] and marks(diagram, node, nxt)[0]
-        if collider and node not in ancestors_of_given:
-            return False
-        if not collider and node in given:
-            return False
-    return True
+
+    def passes(node, head_in: bool, head_out: bool) -> bool:
+        return node in ancestors_of_given if head_in and head_out else node not in given
+
+    feasible = edge_marks(diagram, path[0], path[1]) if len(path) > 1 else set()
+    for node, nxt in zip(path[1:], path[2:]):
+        feasible = {
+            option
+            for option in edge_marks(diagram, node, nxt)
+            if any(passes(node, incoming[1], option[0]) for incoming in feasible)
+        }
+    return len(path) == 1 or bool(feasible)
 
 
 def manipulated(diagram: CausalDiagram, actions, t: int, family, cut_outgoing: bool) -> CausalDiagram:
@@ -172,6 +180,7 @@ def test_pa_plus_example_width_one_window_fails_along_rho():
     rho = (("X", 5), ("X", 4), ("X", 3), ("O", 4), ("O", 5), "Y")
     assert report.witnesses[("X", horizon)] == rho
     assert is_open_path(g, rho, width_k_family(horizon, 1)[("X", horizon)])
+    assert not is_open_path(g, rho, width_k_family(horizon, 1)[("X", horizon)] | {("X", 3)})
     # X_{H-2} is a parent of the C-component {O_{H-2}, O_{H-1}, O_H, Y}.
     assert ("X", horizon - 2) in g.pa_plus("Y")
 
