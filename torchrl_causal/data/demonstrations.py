@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import shutil
 import tempfile
@@ -211,6 +212,21 @@ def read_metadata(path: str | os.PathLike) -> dict[str, Any]:
         raise DatasetError(f"{file} is corrupted: {error}") from error
 
 
+def _check_file_sizes(path: Path, manifest: Mapping[str, Mapping[str, Any]]) -> None:
+    # Checked before mapping: a memory map shorter than its recorded shape would read
+    # past the end of the file instead of failing.
+    for name, entry in manifest.items():
+        file = path / _DATA_DIR / Path(*name.split(".")).with_suffix(".memmap")
+        if not file.is_file():
+            raise DatasetError(f"dataset {path} is missing key {name!r} (no file {file.name})")
+        dtype = getattr(torch, entry["dtype"].removeprefix("torch."))
+        expected = math.prod(entry["shape"]) * dtype.itemsize
+        if file.stat().st_size != expected:
+            raise DatasetError(
+                f"dataset {path} key {name!r} is truncated or padded: {file.stat().st_size} bytes, expected {expected}"
+            )
+
+
 def _check_expected(actual: Any, expected: Any, where: str) -> None:
     if isinstance(expected, Mapping):
         if not isinstance(actual, Mapping):
@@ -252,11 +268,13 @@ def load_demonstrations(
     version = metadata.get("format_version")
     if version != FORMAT_VERSION:
         raise DatasetError(f"dataset {path} has format_version {version!r}; this code reads {FORMAT_VERSION}")
+    manifest = metadata.get("manifest", {})
+    _check_file_sizes(path, manifest)
     try:
         data = TensorDict.load_memmap(path / _DATA_DIR)
     except Exception as error:  # tensordict raises a variety of errors on truncated or missing files
         raise DatasetError(f"dataset {path} cannot be read (truncated or missing file?): {error}") from error
-    manifest, found = metadata.get("manifest", {}), _manifest(data)
+    found = _manifest(data)
     for name, entry in manifest.items():
         if name not in found:
             raise DatasetError(f"dataset {path} is missing key {name!r}")

@@ -39,12 +39,29 @@ class RoverExpert(TensorDictModuleBase):
     in_keys = ["P", ("latent", "O")]
     out_keys = ["action"]
 
-    def __init__(self, env: RoverMazeEnv, *, min_throttle: float = 0.1, margin: float = 0.05, lookahead: int = 6) -> None:
+    def __init__(
+        self,
+        env: RoverMazeEnv,
+        *,
+        min_throttle: float = 0.1,
+        margin: float = 0.05,
+        lookahead: int = 6,
+        turn_gain: float = 0.5,
+        noise_std: float = 0.0,
+        seed: int | None = None,
+    ) -> None:
         super().__init__()
         if not 0.0 <= min_throttle <= 1.0:
             raise ValueError(f"min_throttle must lie in [0, 1], got {min_throttle}")
+        if noise_std < 0:
+            raise ValueError(f"noise_std must be >= 0, got {noise_std}")
         self.params: RoverParameters = env.params
         self.min_throttle = min_throttle
+        self.noise_std = noise_std
+        self.turn_gain = turn_gain
+        self.rng = torch.Generator(device=env.device)
+        if seed is not None:
+            self.rng.manual_seed(seed)
         self.planner = MazePlanner(
             env.layout, env.goal_cell, lookahead=lookahead, clearance=env.params.half_size + margin
         )
@@ -55,9 +72,13 @@ class RoverExpert(TensorDictModuleBase):
         to_target = self.planner.waypoint(position) - position
         desired = torch.atan2(to_target[..., 1:], to_target[..., :1])
         error = torch.remainder(desired - torch.atan2(cos_sin[..., 1:], cos_sin[..., :1]) + math.pi, 2 * math.pi) - math.pi
-        turn = (error / self.params.turn_rate).clamp(-1.0, 1.0)
+        turn = (self.turn_gain * error / self.params.turn_rate).clamp(-1.0, 1.0)
         throttle = torch.cos(error).clamp(self.min_throttle, 1.0)
-        tensordict.set("action", torch.cat((throttle, turn), dim=-1))
+        action = torch.cat((throttle, turn), dim=-1)
+        if self.noise_std > 0:
+            noise = torch.randn(action.shape, generator=self.rng, device=action.device, dtype=action.dtype)
+            action = (action + self.noise_std * noise).clamp(-1.0, 1.0)
+        tensordict.set("action", action)
         return tensordict
 
 

@@ -105,14 +105,15 @@ class MazeLayout:
     def flat_index(self, cells: torch.Tensor) -> torch.Tensor:
         return cells[..., 0] * self.shape[1] + cells[..., 1]
 
-    def box_is_free(self, xy: torch.Tensor, half_size: float) -> torch.Tensor:
+    def box_is_free(self, xy: torch.Tensor, half_size: float | torch.Tensor) -> torch.Tensor:
         """Whether an axis-aligned box of ``half_size`` (world units) centred at ``xy`` touches no wall.
 
-        ``half_size`` must be below half a cell, so the box spans at most 2 x 2 cells.
-        Points outside the map count as blocked.
+        ``half_size`` (a float, or a tensor broadcastable to ``xy.shape[:-1]``) must be below
+        half a cell, so the box spans at most 2 x 2 cells. Points outside the map count as
+        blocked.
         """
         grid = self._grid(xy)
-        half = half_size / self.cell_size
+        half = torch.as_tensor(half_size, dtype=grid.dtype, device=grid.device)[..., None] / self.cell_size
         rows, cols = self.shape
         # The box may overlap the two cells on either side of each edge; checking the four
         # corner cells covers every cell it touches because it is less than one cell wide.
@@ -155,7 +156,7 @@ class MazePlanner:
         *,
         lookahead: int = 6,
         clearance: float | None = None,
-        sight_samples: int = 16,
+        sight_samples: int = 32,
     ) -> None:
         goal = (int(goal_cell[0]), int(goal_cell[1]))
         if not layout.is_free_cell(goal):
@@ -209,11 +210,18 @@ class MazePlanner:
         return torch.stack((flat_path // cols, flat_path % cols), dim=-1)
 
     def in_sight(self, origin: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
-        """Whether the clearance box can slide straight from ``origin`` (``... x 2``) to each target (``... x n x 2``)."""
+        """Whether the clearance box can slide straight from ``origin`` (``... x 2``) to each target (``... x n x 2``).
+
+        Conservative, never optimistic: every point of the segment lies within half a
+        sample spacing (in each axis) of a sample, so boxes grown by that much at the
+        samples cover the whole sweep.
+        """
         fractions = torch.linspace(0.0, 1.0, self.sight_samples, device=origin.device)
-        origin = origin.unsqueeze(-2).unsqueeze(-2)
-        points = origin + (targets.unsqueeze(-2) - origin) * fractions[:, None]
-        return self.layout.box_is_free(points, self.clearance).all(-1)
+        origin = origin.unsqueeze(-2)
+        spacing = (targets - origin).abs().amax(-1) / (self.sight_samples - 1)
+        points = origin.unsqueeze(-2) + (targets - origin).unsqueeze(-2) * fractions[:, None]
+        half_size = (self.clearance + spacing / 2).clamp_max(0.499 * self.layout.cell_size)
+        return self.layout.box_is_free(points, half_size[..., None]).all(-1)
 
     def waypoint(self, xy: torch.Tensor) -> torch.Tensor:
         """The world position to head for from each ``xy`` (``... x 2``).

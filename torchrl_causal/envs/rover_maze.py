@@ -63,13 +63,14 @@ class RoverParameters:
         start_jitter: half-width of the uniform jitter of the start position.
     """
 
-    max_speed: float = 0.0275
+    max_speed: float = 0.0265
     turn_rate: float = 0.25
     speed_response: float = 0.5
     gust_push: float = 0.004
     half_size: float = 0.15
-    goal_radius: float = 0.3
+    goal_radius: float = 0.5
     start_jitter: float = 0.1
+    heading_noise: float = 0.05
 
     def __post_init__(self) -> None:
         if not 0 < self.half_size < 0.5:
@@ -97,6 +98,7 @@ def rover_dynamics(
     gust: torch.Tensor,
     layout: MazeLayout,
     params: RoverParameters,
+    slip: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """One step of the rover: ``(P_t, angle_t, L_t, X_t, U_t) -> (P_{t+1}, angle_{t+1}, L_{t+1})``.
 
@@ -114,7 +116,10 @@ def rover_dynamics(
     """
     throttle, turn = action.clamp(-1.0, 1.0).split(1, dim=-1)
     # O_{t-1} -> O_t and X_{t-1} -> O_t: the heading persists and turns with the action.
-    heading = _wrap_angle(heading + params.turn_rate * turn)
+    heading = heading + params.turn_rate * turn
+    if slip is not None:
+        heading = heading + slip
+    heading = _wrap_angle(heading)
     # L_{t-1} -> L_t and X_{t-1} -> L_t: first-order response of the wheel speed to throttle.
     speed = speed + params.speed_response * (params.max_speed * throttle - speed)
     # O_t -> P_t, L_t -> P_t (lag 0) and the gust U_{t-1} (bidirected P edges in the template).
@@ -228,8 +233,11 @@ class RoverMazeEnv(GustConfoundedEnv):
     def _transition(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         # The reward of step t pays for the gust U_t that blows during it.
         reward = -1.0 - self.gust_penalty()
+        slip = None
+        if self.params.heading_noise > 0:
+            slip = self.params.heading_noise * torch.randn(self.heading.shape, generator=self.rng, device=self.device)
         self.position, self.heading, self.speed = rover_dynamics(
-            self.position, self.heading, self.speed, action, self.gust, self.layout, self.params
+            self.position, self.heading, self.speed, action, self.gust, self.layout, self.params, slip
         )
         success = (self.position - self.goal_position).norm(dim=-1, keepdim=True) < self.params.goal_radius
         return reward, success
