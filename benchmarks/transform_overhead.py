@@ -20,6 +20,7 @@ Run (the figures in results/transform_overhead.md)::
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import torch
@@ -147,6 +148,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=8)
     parser.add_argument("--transitions", type=int, default=1_000_000)
     parser.add_argument("--antmaze-steps", type=int, default=2000)
+    parser.add_argument("--offline-threads", type=int, default=1)
     args = parser.parse_args()
     torch.set_num_threads(1)  # the per-step path is latency-bound; one thread keeps runs comparable
     window = causal_window(args.k)
@@ -181,23 +183,45 @@ def main() -> None:
             f"{overhead / ant:.1%} of 1 step ({overhead / (batch * ant):.2%} of {batch}) |"
         )
 
-    torch.set_num_threads(2)  # offline encoding: the 2-core budget of the target
+    torch.set_num_threads(args.offline_threads)
     data = stored_transitions(args.transitions)
     transform = CausalWindowTransform(window)
-    wall, cpu = time.perf_counter(), time.process_time()
-    encoded = transform.encode_trajectories(data)
-    ours = time.perf_counter() - wall, time.process_time() - cpu
-    features = encoded["observation"].shape[-1]
-    del encoded
-    catframes = CatFrames(N=args.k + 1, dim=-1, in_keys=list(STATE), padding="constant")
-    wall, cpu = time.perf_counter(), time.process_time()
-    catframes(data.exclude("is_init").unsqueeze(0).refine_names(None, "time"))
-    baseline = time.perf_counter() - wall, time.process_time() - cpu
+    features = transform.encode_trajectories(data[:10])["observation"].shape[-1]
+    state_keys = list(STATE)
+    catframes = CatFrames(
+        N=args.k + 1, dim=-1, in_keys=state_keys + [("next", key) for key in state_keys], padding="constant"
+    )
+    timed = {
+        # allocating + zero-filling the two outputs: the memory floor of any encoder
+        "memory floor (zeros, 2 outputs)": lambda: (
+            torch.zeros(args.transitions, features),
+            torch.zeros(args.transitions, features),
+        ),
+        "encode_trajectories": lambda: transform.encode_trajectories(data),
+        "CatFrames unfolding (5 state keys, root + next)": lambda: catframes(
+            data.exclude("is_init").unsqueeze(0).refine_names(None, "time")
+        ),
+    }
+    best = {name: (float("inf"), 0.0, 0.0) for name in timed}
+    for _ in range(2):  # interleaved rounds: the VM's first touch of fresh memory is costly and erratic
+        for name, run in timed.items():
+            before, wall = os.times(), time.perf_counter()
+            result = run()
+            wall, after = time.perf_counter() - wall, os.times()
+            del result
+            if wall < best[name][0]:
+                best[name] = (wall, after.user - before.user, after.system - before.system)
+    print(f"\noffline, {args.transitions:,} transitions, {features} features, {torch.get_num_threads()} torch thread(s), "
+          "best of 2 interleaved rounds:")
+    print("\n| | wall s | user CPU s | system CPU s |\n|---|---|---|---|")
+    for name, (wall, user, system) in best.items():
+        print(f"| {name} | {wall:.2f} | {user:.2f} | {system:.2f} |")
+    ours, floor = best["encode_trajectories"], best["memory floor (zeros, 2 outputs)"]
+    baseline = best["CatFrames unfolding (5 state keys, root + next)"]
     print(
-        f"\noffline, {args.transitions:,} transitions, {features} features, {torch.get_num_threads()} threads:\n"
-        f"  encode_trajectories (observation + next observation): {ours[0]:.2f} s wall, {ours[1]:.2f} s CPU\n"
-        f"  CatFrames unfolding of the five state keys (root only): {baseline[0]:.2f} s wall, {baseline[1]:.2f} s CPU\n"
-        f"  ours / CatFrames (wall) = {ours[0] / baseline[0]:.2f}"
+        f"\nours / CatFrames: wall {ours[0] / baseline[0]:.2f}, user CPU {ours[1] / baseline[1]:.2f} "
+        f"(ours writes {features} features, CatFrames {sum(STATE.values()) * (args.k + 1)}); "
+        f"ours above the memory floor: {ours[0] - floor[0]:.2f} s wall"
     )
 
 

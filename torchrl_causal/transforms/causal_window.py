@@ -258,7 +258,9 @@ class CausalWindowTransform(Transform):
         else:
             for var, b in bounds.items():
                 if b is None:
-                    infinite = torch.full((*batch, layout.widths[var]), torch.inf, dtype=dtype)
+                    infinite = torch.full(
+                        (*batch, layout.widths[var]), torch.inf, dtype=dtype, device=observation_spec.device
+                    )
                     bounds[var] = (-infinite, infinite)
             low, high = layout.bounds(bounds)
             encoding_spec = Bounded(low=low, high=high, shape=shape, dtype=dtype, device=observation_spec.device)
@@ -404,26 +406,28 @@ class CausalWindowTransform(Transform):
         lag, column = layout.feature_lag, layout.feature_column
         # Row i of `windows` (below) is frames i-k..i flattened, oldest first: the frame
         # `lag` steps back starts at (k - lag) * width. At t + 1 the frame `lag` steps back
-        # is one row later; its lag-0 columns are the next states, written separately.
+        # is one row later; its lag-0 columns are the next states, copied in afterwards.
         position = (k - lag) * width + column
         next_position = (k - (lag - 1).clamp(min=0)) * width + column
-        current = (lag == 0).nonzero().squeeze(-1)
-        current_columns = column[current]
         n = flat.numel()
-        encoding = frames.new_empty((n, layout.num_features))
-        next_encoding = frames.new_empty((n, layout.num_features))
+        # zero-filled up front: first-touch page faults cost far more inside the gather
+        encoding = frames.new_zeros((n, layout.num_features))
+        next_encoding = frames.new_zeros((n, layout.num_features))
         for start in range(0, n, self.chunk_size):
             stop = min(start + self.chunk_size, n)
             windows = frames.view(-1)[start * width :].as_strided((stop - start, (k + 1) * width), (width, 1))
             torch.index_select(windows, 1, position, out=encoding[start:stop])
             torch.index_select(windows, 1, next_position, out=next_encoding[start:stop])
-            next_encoding[start:stop, current] = next_states[start:stop, current_columns]
             # Only the first k steps of an episode reach back before its start: zero-pad those.
             early = (steps[start:stop] < k).nonzero().squeeze(-1) + start
             if early.numel():
                 step = steps[early, None]
                 encoding[early] = encoding[early].masked_fill_(step < lag, 0)
                 next_encoding[early] = next_encoding[early].masked_fill_(step < lag - 1, 0)
+        for feature in layout.features:
+            if feature.lag == 0:
+                first = layout.frame_offsets[feature.variable]
+                next_encoding[:, feature.columns] = next_states[:, first : first + layout.widths[feature.variable]]
 
         hidden = [*self.hidden_keys, *(("next", key) for key in self.hidden_keys)]
         out = trajectories.exclude(*hidden)
@@ -504,7 +508,10 @@ class CausalWindowTransform(Transform):
 
     def __repr__(self) -> str:
         lags = ", ".join(f"{var}@{list(lags)}" for var, lags in self.window.lags.items())
-        return f"{type(self).__name__}(k={self.window.k}, lags=[{lags}], hidden={list(self.hidden_keys)}, out_key={self.out_key!r})"
+        return (
+            f"{type(self).__name__}(k={self.window.k}, lags=[{lags}], hidden={list(self.hidden_keys)}, "
+            f"out_key={self.out_key!r})"
+        )
 
 
 def _encoding_dtype(dtypes) -> torch.dtype:
