@@ -443,3 +443,27 @@ def test_nan_in_an_admissible_key_is_refused_and_the_check_can_be_disabled():
 
     with pytest.raises(ValueError, match="NaN in admissible key 'P'"):
         TransformedEnv(NanEnv([4]), CausalWindowTransform(CAUSAL)).rollout(3, counting_policy)
+
+
+def test_action_key_missing_from_env_is_named():
+    with pytest.raises(KeyError, match=r"window variable \W+X\W+ \(key \W+torque"):
+        TransformedEnv(CountingEnv([3]), CausalWindowTransform(CAUSAL, action_key="torque")).observation_spec
+
+
+def test_discrete_specs_give_their_integer_ranges():
+    from torchrl.data import Binary, Categorical, MultiCategorical, OneHot
+
+    from torchrl_causal.transforms._layout import spec_bounds
+
+    cases = [  # batch of 2 in front of each event shape
+        (Categorical(5, shape=(2,)), [0], [4]),
+        (OneHot(3, shape=(2, 3)), [0] * 3, [1] * 3),
+        (Binary(n=2, shape=(2, 2)), [0] * 2, [1] * 2),
+        (MultiCategorical([2, 4], shape=(2, 2)), [0, 0], [1, 3]),
+    ]
+    for spec, low, high in cases:
+        bounds = spec_bounds(spec, 1, torch.float32)
+        width = len(low)
+        assert bounds[0].shape == (2, width) and bounds[0].dtype == torch.float32
+        assert bounds[0][1].tolist() == low and bounds[1][1].tolist() == high
+    assert spec_bounds(Unbounded(shape=(2, 3)), 1, torch.float32) is None
