@@ -467,3 +467,31 @@ def test_discrete_specs_give_their_integer_ranges():
         assert bounds[0].shape == (2, width) and bounds[0].dtype == torch.float32
         assert bounds[0][1].tolist() == low and bounds[1][1].tolist() == high
     assert spec_bounds(Unbounded(shape=(2, 3)), 1, torch.float32) is None
+
+
+def test_include_current_false_keeps_only_past_steps():
+    window = AdjustmentWindow(k=2, action="X", lags={"P": (0, 1, 2), "X": (1, 2)}, observed=("P", "W", "X"))
+    transform = CausalWindowTransform(window, include_current=False)
+    assert transform.window.lags == {"P": (1, 2), "X": (1, 2)}
+    episode = TensorDict(
+        {"P": torch.tensor([[1.0], [2.0], [3.0]]), "W": torch.zeros(3, 1),
+         "action": torch.tensor([[10.0], [20.0], [30.0]]),
+         "is_init": torch.tensor([[True], [False], [False]]),
+         "next": {"P": torch.tensor([[2.0], [3.0], [4.0]]), "W": torch.zeros(3, 1)}},
+        batch_size=[3],
+    )
+    # columns: P_{t-1}, P_{t-2}, X_{t-1}, X_{t-2}
+    expected = torch.tensor([[0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 10.0, 0.0], [2.0, 1.0, 20.0, 10.0]])
+    torch.testing.assert_close(transform.encode_trajectories(episode)["observation"], expected)
+
+
+def test_causal_false_conditions_on_every_observed_variable_at_the_window_lags():
+    window = AdjustmentWindow(
+        k=2, action="X", lags={"P": (0, 1, 2), "X": (1, 2)}, excluded=frozenset({"W"}), exact=False,
+        observed=("P", "W", "X"),
+    )
+    twin = CausalWindowTransform(window, causal=False).window
+    assert twin.lags == {"P": (0, 1, 2), "W": (0, 1, 2), "X": (1, 2)}
+    assert twin.excluded == frozenset() and not twin.exact
+    with pytest.raises(ValueError, match="observed"):
+        CausalWindowTransform(AdjustmentWindow(k=1, action="X", lags={"P": (0,)}), causal=False)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import torch
@@ -19,6 +20,25 @@ from torchrl_causal.transforms._layout import FeatureSlice, LagRing, WindowLayou
 __all__ = ["CausalWindowTransform"]
 
 LATENT_KEY = "latent"
+
+
+def _applied_window(window: AdjustmentWindow, *, include_current: bool, causal: bool) -> AdjustmentWindow:
+    """The window the transform encodes, after the constructor's two switches.
+
+    The result (not the argument) is what the transform saves in its state, so a reloaded
+    transform never depends on how the switches were set.
+    """
+    if not causal:
+        if not window.observed:
+            raise ValueError("causal=False needs window.observed to know which variables the imitator sees")
+        state_lags = tuple(sorted({lag for var, lags in window.lags.items() if var != window.action for lag in lags}))
+        action_lags = tuple(range(1, window.k + 1))
+        lags = {var: action_lags if var == window.action else state_lags for var in window.observed}
+        window = replace(window, lags={v: l for v, l in lags.items() if l}, excluded=frozenset(), exact=False, witnesses=())
+    if not include_current:
+        past = {var: tuple(lag for lag in lags if lag > 0) for var, lags in window.lags.items()}
+        window = replace(window, lags={var: lags for var, lags in past.items() if lags})
+    return window
 
 
 class CausalWindowTransform(Transform):
@@ -58,6 +78,12 @@ class CausalWindowTransform(Transform):
         out_key: where the encoding is written. Defaults to ``"observation"``.
         action_key: the env key of the window's action variable. Defaults to
             ``"action"``.
+        include_current: keep lag 0 (the current step) of the state variables. ``False``
+            encodes only past steps, the paper's Algorithm 1 line 14 reading (lags
+            ``1..k``). Defaults to ``True``.
+        causal: ``False`` turns ``window`` into its non-causal twin: every observed
+            variable, excluded ones such as ``W`` included, at the window's lags (the
+            window-matched baseline). Defaults to ``True``.
         check_nan: raise, naming the variable, when the encoding contains a NaN (one
             reduction per step). Defaults to ``True``.
         chunk_size: rows encoded at once by :meth:`encode_trajectories`, bounding its
@@ -99,11 +125,14 @@ class CausalWindowTransform(Transform):
         *,
         out_key: NestedKey = "observation",
         action_key: NestedKey = "action",
+        include_current: bool = True,
+        causal: bool = True,
         check_nan: bool = True,
         chunk_size: int = 2048,
     ) -> None:
         if not isinstance(window, AdjustmentWindow):
             raise TypeError(f"window must be an AdjustmentWindow, got {type(window).__name__}")
+        window = _applied_window(window, include_current=include_current, causal=causal)
         if window.observed:
             unobserved = [var for var in window.lags if var not in window.observed]
             if unobserved:
