@@ -17,7 +17,7 @@ EPISODES = 12
 
 
 def _collect(path: Path, seed: int = 0, **kwargs):
-    env = RoverMazeEnv(maze="u", batch_size=(8,), horizon=400)
+    env = RoverMazeEnv(maze="u", batch_size=(EPISODES,), horizon=400)
     return collect_demonstrations(env, RoverExpert(env, seed=seed), EPISODES, path, seed=seed, progress=False, **kwargs)
 
 

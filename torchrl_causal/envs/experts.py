@@ -31,7 +31,7 @@ class RoverExpert(TensorDictModuleBase):
 
     Examples:
         >>> env = RoverMazeEnv(maze="u", batch_size=(16,), seed=0)
-        >>> td = env.rollout(400, RoverExpert(env))
+        >>> td = env.rollout(400, RoverExpert(env, seed=0), break_when_any_done=False)
         >>> td["next", "success"].any(-2).float().mean().item()
         1.0
     """
