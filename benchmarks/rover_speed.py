@@ -14,7 +14,10 @@ Rounds alternate between the rows so that load from other processes hits all of 
 alike; each row's figure is its median over rounds of env steps (batch x steps) per CPU
 second of the process (``time.process_time``); the ratio divides it by the baseline's.
 
-Run: ``OMP_NUM_THREADS=1 python benchmarks/rover_speed.py [--batch 256] [--steps 400] [--rounds 5] [--threads 1]``
+With ``--expert N``, also measures :class:`~torchrl_causal.envs.RoverExpert` over ``N``
+episodes per maze (train regime; its success rate and mean successful episode length).
+
+Run: ``OMP_NUM_THREADS=1 python benchmarks/rover_speed.py [--batch 256] [--steps 400] [--rounds 5] [--threads 1] [--expert 256]``
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from collections.abc import Callable
 
 import torch
 
-from torchrl_causal.envs import RoverMazeEnv
+from torchrl_causal.envs import RoverExpert, RoverMazeEnv
 from torchrl_causal.envs.rover_maze import rover_dynamics, unit_heading
 
 
@@ -71,12 +74,35 @@ def torchrl_env(env: RoverMazeEnv, actions: torch.Tensor) -> float:
     return actions.numel() / 2 / (time.process_time() - start)
 
 
+@torch.no_grad()
+def expert_report(maze: str, episodes: int) -> str:
+    """The expert's success rate and mean successful length over ``episodes`` first episodes."""
+    env = RoverMazeEnv(maze=maze, batch_size=(episodes,), regime="train", seed=0)
+    expert = RoverExpert(env, seed=0)
+    td = env.reset()
+    first_success = torch.zeros(episodes, dtype=torch.long)
+    for t in range(env.horizon):
+        step = env.step(expert(td))
+        newly = step["next", "success"].squeeze(-1) & (first_success == 0)
+        first_success[newly] = t + 1
+        if (first_success > 0).all():
+            break
+        td = step["next"]
+    reached = first_success > 0
+    lengths = first_success[reached].float()
+    return (
+        f"| {maze} | {episodes} | {reached.float().mean().item():.3f} | {lengths.mean().item():.1f} "
+        f"| {int(lengths.min())}-{int(lengths.max())} |"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--batch", type=int, default=256)
     parser.add_argument("--steps", type=int, default=400)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--expert", type=int, default=0, help="episodes per maze for the expert report")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     env = RoverMazeEnv(maze="medium", batch_size=(args.batch,), regime="deploy", seed=0)
@@ -96,6 +122,10 @@ def main() -> None:
     for name, values in rates.items():
         rate = statistics.median(values)
         print(f"| {name} | {rate:,.0f} | {rate / baseline:.2f} |")
+    if args.expert:
+        print("\n| maze | episodes | expert success | mean successful length | range |\n| --- | ---: | ---: | ---: | ---: |")
+        for maze in ("u", "medium", "large"):
+            print(expert_report(maze, args.expert))
 
 
 if __name__ == "__main__":

@@ -18,16 +18,26 @@ class RoverExpert(TensorDictModuleBase):
     """Waypoint-following expert for :class:`~torchrl_causal.envs.RoverMazeEnv`.
 
     Reads the position ``"P"`` and the true heading ``("latent", "O")`` and writes
-    ``"action"`` = (throttle, turn): it turns towards the :class:`MazePlanner` waypoint as
-    fast as the turn rate allows and throttles by the cosine of the remaining heading
-    error, never below ``min_throttle`` (so it always creeps forward while it turns, which
-    keeps its heading visible in its displacement). Deterministic.
+    ``"action"`` = (throttle, turn): it turns towards the :class:`MazePlanner` waypoint in
+    proportion to the heading error (``turn_gain * error / turn_rate``, clipped) and
+    throttles by the cosine of the error, never below ``min_throttle`` (so it always creeps
+    forward while it turns, which keeps its heading visible in its displacement).
+
+    Gaussian noise of ``noise_std`` is added to both action components (then clipped), as
+    in DART: the demonstrations then show how the expert recovers from small deviations,
+    which behaviour cloning needs to stay on track in closed loop. ``noise_std=0`` gives a
+    deterministic expert. The smooth gain (rather than turning as fast as possible) keeps
+    the action a gentle function of the heading, so an imitator that infers the heading
+    approximately still acts nearly as the expert does.
 
     Args:
         env: the env to solve (its maze, goal and rover parameters are read once).
         min_throttle: smallest throttle, applied when facing away from the waypoint.
         margin: extra clearance (cells) beyond the rover's footprint for lines of sight.
         lookahead: path cells the planner may look ahead.
+        turn_gain: fraction of the heading error corrected per step (before clipping).
+        noise_std: standard deviation of the action noise.
+        seed: seed of the noise generator (``None`` draws one from torch's global RNG).
 
     Examples:
         >>> env = RoverMazeEnv(maze="u", batch_size=(16,), seed=0)
@@ -46,8 +56,8 @@ class RoverExpert(TensorDictModuleBase):
         min_throttle: float = 0.1,
         margin: float = 0.05,
         lookahead: int = 6,
-        turn_gain: float = 0.5,
-        noise_std: float = 0.0,
+        turn_gain: float = 0.33,
+        noise_std: float = 0.2,
         seed: int | None = None,
     ) -> None:
         super().__init__()
@@ -60,8 +70,7 @@ class RoverExpert(TensorDictModuleBase):
         self.noise_std = noise_std
         self.turn_gain = turn_gain
         self.rng = torch.Generator(device=env.device)
-        if seed is not None:
-            self.rng.manual_seed(seed)
+        self.rng.manual_seed(int(torch.randint(0, 2**62, ()).item()) if seed is None else seed)
         self.planner = MazePlanner(
             env.layout, env.goal_cell, lookahead=lookahead, clearance=env.params.half_size + margin
         )

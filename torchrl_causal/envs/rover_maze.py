@@ -3,13 +3,15 @@
 The rover mirrors the Confounded AntMaze mechanism at a fraction of the cost (no MuJoCo):
 
 * the action X = (throttle, turn) in [-1, 1]^2 sets the heading O and the signed forward
-  (wheel) speed L, which carry over from step to step;
+  (wheel) speed L, which carry over from step to step; the heading also slips by
+  independent N(0, 0.05^2) radians per step, so the expert must keep correcting it;
 * the position P moves by L along O, plus the push of the gust U; walls stop motion along
   each blocked axis (the rover slides along walls and never crosses one);
 * the gust process of DESIGN.md (:class:`~torchrl_causal.envs.GustProcess`) pushes the
   rover, costs reward, and contaminates the compass W (0.9 heading + 0.1 gust direction +
   noise, tanh-bounded, rotated by ``confounding_strength * pi`` when deployed);
-* the reward is ``-1 - 0.1 |U_t|`` per step; reaching the goal radius ends the episode.
+* the reward is ``-1 - 0.1 |U_t|`` per step; coming within 0.5 cells of the goal centre
+  ends the episode (success).
 
 The imitator observes P, L and W (and its own past actions); the heading O is latent
 (under ``("latent", "O")`` as ``(cos, sin)``, for experts only). L is a scalar on purpose:
@@ -20,8 +22,8 @@ reset says where the rover faces.
 
 Tasks (``(row, col)`` cells of the gymnasium-robotics maps, cell size 1, start position
 jittered by up to 0.1 in each axis): ``u``: (1, 1) → (3, 1); ``medium``: (1, 1) → (6, 6);
-``large``: (7, 1) → (7, 10). With the default speeds the expert needs about 300 steps on
-medium and 600 on large (see ``results/rover_speed.md``).
+``large``: (7, 1) → (7, 10). With the default speeds :class:`~torchrl_causal.envs.RoverExpert`
+needs about 310 steps on medium and 640 on large (see ``results/rover_speed.md``).
 """
 
 from __future__ import annotations
@@ -61,9 +63,10 @@ class RoverParameters:
         half_size: half-side of the rover's square footprint (collision box).
         goal_radius: distance to the goal centre that counts as success.
         start_jitter: half-width of the uniform jitter of the start position.
+        heading_noise: standard deviation (radians) of the independent heading slip per step.
     """
 
-    max_speed: float = 0.0265
+    max_speed: float = 0.028
     turn_rate: float = 0.25
     speed_response: float = 0.5
     gust_push: float = 0.004
@@ -117,7 +120,7 @@ def rover_dynamics(
     throttle, turn = action.clamp(-1.0, 1.0).split(1, dim=-1)
     # O_{t-1} -> O_t and X_{t-1} -> O_t: the heading persists and turns with the action.
     heading = heading + params.turn_rate * turn
-    if slip is not None:
+    if slip is not None:  # independent per-step noise: an exogenous term, not a confounder
         heading = heading + slip
     heading = _wrap_angle(heading)
     # L_{t-1} -> L_t and X_{t-1} -> L_t: first-order response of the wheel speed to throttle.
