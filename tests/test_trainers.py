@@ -177,3 +177,18 @@ def test_route_choice_bc_reproduces_the_appendix_values(tmp_path: Path) -> None:
         for regime, value in (("train", train_value), ("deploy", deploy_value)):
             result = results[regime]
             assert abs(result.return_mean - value) < 4 * result.success_se + 1e-9, (causal, regime, result.return_mean)
+
+
+def test_evaluate_cli_reloads_best_policy(trained_runs) -> None:
+    from torchrl_causal.evaluate import main as evaluate_main
+
+    root = trained_runs["rovermaze_u"]
+    for label in ("c_sqil", "expert"):
+        (run,) = [r for r in load_runs(root) if r.label == label]
+        result = evaluate_main([f"run_dir={run.path}", "regime=deploy", "episodes=6", "num_envs=3",
+                                "confounding_strength=0.5"])
+        assert result.n_episodes == 6 and result.regime == "deploy"
+        assert (run.path / "eval" / "deploy-cs0.5.json").is_file()
+    assert len(load_runs(root)) == 9  # the extra record does not replace the final evaluation
+    with pytest.raises(SystemExit, match="unknown argument"):
+        evaluate_main([f"run_dir={root}", "episodez=3"])

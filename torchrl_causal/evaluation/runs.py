@@ -116,7 +116,9 @@ def load_run(run_dir: str | Path) -> RunRecord:
             raise ValueError(f"{config_file} lacks the key {key!r}")
     evaluations: dict[str, EvaluationResult] = {}
     maze = None
-    for path in sorted((run_dir / EVAL_DIR).glob("*.json")):
+    for path in (eval_path(run_dir, regime) for regime in ("train", "deploy")):
+        if not path.is_file():
+            continue
         data = json.loads(path.read_text())
         evaluations[data["regime"]] = EvaluationResult.from_dict(data)
         maze = data.get("maze", maze)

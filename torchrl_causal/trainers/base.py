@@ -166,14 +166,24 @@ class Trainer(ABC):
         """The env a policy is evaluated in (the imitator's view by default)."""
         return make_imitator_env(self.cfg, self.window, regime, batch_size, seed)
 
-    def eval_policy(self) -> TensorDictModuleBase:
-        return self.policy
+    def load_best_policy(self) -> TensorDictModuleBase:
+        """The acting network rebuilt from the config with ``checkpoints/best.pt`` loaded
+        (for evaluating a finished run without its training state)."""
+        env = self.make_eval_env("train", 1, 0)
+        policy = self.build_policy(self.cfg, env)
+        env.close()
+        path = self.checkpoint_dir / BEST_CHECKPOINT
+        if not path.is_file():
+            raise CheckpointError(f"run {self.run_dir} has no {CHECKPOINT_DIR}/{BEST_CHECKPOINT} to evaluate")
+        policy.load_state_dict(load_checkpoint(path)["policy"])
+        return policy
 
-    def evaluate(self, regime: str, episodes: int, seed: int, trajectories: int = 0,
-                 progress: bool = False) -> EvaluationResult:
-        """Runs the current policy (eval mode: no dropout) for ``episodes`` episodes."""
+    def evaluate(self, regime: str, episodes: int, seed: int, *, trajectories: int = 0, progress: bool = False,
+                 policy: TensorDictModuleBase | None = None) -> EvaluationResult:
+        """Runs ``policy`` (default: the one being trained) in eval mode (no dropout) for
+        ``episodes`` episodes in batches of ``cfg.eval.num_envs``."""
         env = self.make_eval_env(regime, min(int(self.cfg.eval.num_envs), episodes), seed)
-        policy = self.eval_policy()
+        policy = self.policy if policy is None else policy
         was_training = getattr(policy, "training", None)  # scripted experts are plain callables
         if was_training is not None:
             policy.eval()
@@ -259,7 +269,7 @@ class Trainer(ABC):
         if result.return_mean > self.best_return:
             self.best_return, self.best_progress = result.return_mean, self.progress
             atomic_save({"progress": self.progress, "train_return": result.return_mean,
-                         "policy": self.eval_policy().state_dict()}, self.checkpoint_dir / BEST_CHECKPOINT)
+                         "policy": self.policy.state_dict()}, self.checkpoint_dir / BEST_CHECKPOINT)
         self.save_checkpoint()
         return result
 
@@ -267,7 +277,7 @@ class Trainer(ABC):
         """Evaluates the best checkpoint in both regimes and writes ``eval/<regime>.json``."""
         best = self.checkpoint_dir / BEST_CHECKPOINT
         if best.is_file():
-            self.eval_policy().load_state_dict(load_checkpoint(best)["policy"])
+            self.policy.load_state_dict(load_checkpoint(best)["policy"])
         results = {}
         for offset, regime in enumerate(("train", "deploy")):
             result = self.evaluate(regime, int(self.cfg.eval.final_episodes),
