@@ -148,8 +148,10 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
         try:
             collect_demonstrations(env, make_expert(cfg, env), episodes, path, seed=int(cfg.demos.seed),
                                    progress=bool(cfg.progress_bar))
-        except FileExistsError:
-            pass  # another run finished collecting the same set first
+        except OSError:
+            if not path.exists():
+                raise
+            # Another run finished collecting the same set first (rename onto its folder failed).
         finally:
             env.close()
     return load_demonstrations(path, expected=reference)
