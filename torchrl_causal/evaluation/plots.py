@@ -57,7 +57,8 @@ def plot_training_curves(runs: Sequence[RunRecord], path: str | Path) -> Path | 
                 ax.scatter([steps[-1]], [value], color=colour, marker="X", s=80, zorder=3,
                            label=f"{display_name(label)} (deploy, final)")
         ax.set_title(display_name(family))
-        ax.set_xlabel("training progress (env steps / epochs / rounds)")
+        units = {r.unit for label in (family, f"c_{family}") for r in by_label.get(label, ()) if r.unit}
+        ax.set_xlabel(f"training progress ({' / '.join(sorted(units)) or 'steps'})")
         ax.set_ylabel("evaluation return E[Y]")
         ax.legend(fontsize=7)
     fig.tight_layout()

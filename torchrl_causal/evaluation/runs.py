@@ -79,6 +79,7 @@ class RunRecord:
     seed: int
     evaluations: Mapping[str, EvaluationResult]
     curve: Sequence[tuple[int, float]] = ()
+    unit: str = ""  # what the curve's steps count (env steps, epochs, rounds)
     maze: Mapping[str, Any] | None = field(default=None, compare=False)
 
 
@@ -123,6 +124,7 @@ def load_run(run_dir: str | Path) -> RunRecord:
         evaluations[data["regime"]] = EvaluationResult.from_dict(data)
         maze = data.get("maze", maze)
     curve_file = run_dir / LOG_DIR / "scalars" / f"{TRAIN_CURVE}.csv"
+    status_file = run_dir / STATUS_FILE
     return RunRecord(
         path=run_dir,
         label=run_label(cfg.algo.name, bool(cfg.causal), bool(OmegaConf.select(cfg, "window.window_matched"))),
@@ -132,6 +134,7 @@ def load_run(run_dir: str | Path) -> RunRecord:
         seed=int(cfg.seed),
         evaluations=evaluations,
         curve=read_scalar_csv(curve_file) if curve_file.is_file() else (),
+        unit=json.loads(status_file.read_text()).get("unit", "") if status_file.is_file() else "",
         maze=maze,
     )
 
