@@ -98,6 +98,15 @@ def test_finished_run_is_not_retrained(trained_runs) -> None:
     assert (Path(cfg.run_dir) / "eval" / "deploy.json").stat().st_mtime_ns == before
 
 
+def test_raising_the_budget_continues_a_finished_run(tmp_path: Path) -> None:
+    make_trainer(tiny_config(tmp_path, "route_choice", "gail", True)).fit()
+    longer = make_trainer(tiny_config(tmp_path, "route_choice", "gail", True, "algo.rounds=4"))
+    longer.fit()
+    status = json.loads((Path(longer.cfg.run_dir) / "status.json").read_text())
+    assert (status["status"], status["progress"], status["total"]) == ("complete", 4, 4)
+    assert [step for step, _ in read_scalar_csv(Path(longer.cfg.run_dir) / "logs/scalars/eval/train_return.csv")] == [1, 2, 3, 4]
+
+
 class _Interrupted(Exception):
     pass
 

@@ -292,10 +292,12 @@ class Trainer(ABC):
     def fit(self) -> dict[str, EvaluationResult]:
         """Trains (or resumes) to :attr:`total`, then evaluates the best policy.
 
-        A run whose ``status.json`` says complete is not trained again (with
-        ``resume=true``): its stored evaluations are returned.
+        A run whose ``status.json`` says complete at this :attr:`total` is not trained
+        again (with ``resume=true``): its stored evaluations are returned. Raising the
+        budget of a finished run continues it from its last checkpoint.
         """
-        if bool(self.cfg.resume) and read_status(self.run_dir).get("status") == "complete":
+        status = read_status(self.run_dir)
+        if bool(self.cfg.resume) and status.get("status") == "complete" and status.get("total") == self.total:
             return {regime: EvaluationResult.from_dict(json.loads(eval_path(self.run_dir, regime).read_text()))
                     for regime in ("train", "deploy") if eval_path(self.run_dir, regime).is_file()}
         self._seed()
