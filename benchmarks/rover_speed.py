@@ -54,10 +54,11 @@ def raw_scm_step(env: RoverMazeEnv, actions: torch.Tensor) -> float:
     step_count = torch.zeros(batch, 1, dtype=torch.long)
     start = time.process_time()
     for action in actions:
-        reward = -1.0 - env.gust_penalty_weight * env.gust_process.exposure(gust)
         slip = env.params.heading_noise * torch.randn(heading.shape, generator=generator)
         position, heading, speed = rover_dynamics(position, heading, speed, action, gust, env.layout, env.params, slip)
-        success = (position - env.goal_position).norm(dim=-1, keepdim=True) < env.params.goal_radius
+        distance = (position - env.goal_position).norm(dim=-1, keepdim=True)
+        success = distance < env.params.goal_radius
+        reward = success.float() - env.gust_process.exposure(gust) * (1 + env.metres_per_unit * distance / 25)
         step_count = step_count + 1
         gust = env.gust_process.advance(gust, step_count, generator=generator)
         compass = env.compass.read(unit_heading(heading), gust, rotation=math.pi, generator=generator)

@@ -33,9 +33,10 @@ class DriftEnv(GustConfoundedEnv):
         self.point = torch.where(mask, fresh, getattr(self, "point", fresh))
 
     def _transition(self, action):
-        reward = -1.0 - self.gust_penalty()
         self.point = self.point + action
-        return reward, self.point.norm(dim=-1, keepdim=True) > 3.0
+        distance = self.point.norm(dim=-1, keepdim=True)
+        success = distance > 3.0
+        return self.maze_reward(success, distance), success
 
     def _observation(self):
         east = torch.tensor([1.0, 0.0]).expand(*self.batch_size, 2)

@@ -139,7 +139,9 @@ def test_reaching_the_goal_terminates(env_cls):
     assert out["success"].squeeze(-1).tolist() == [True, False]
     assert out["terminated"].squeeze(-1).tolist() == [True, False]
     assert out["done"].squeeze(-1).tolist() == [True, False]
-    expected_reward = -1.0 - env.gust_penalty_weight * td["scm", "U"].norm(dim=-1, keepdim=True)
+    # the paper's reward: 1{success} - |U_t| (1 + d_t / 25), d_t in metres after the step
+    distance = torch.from_numpy(np.linalg.norm(env.simulator.qpos()[:, :2] - env.goal_xy, axis=1)).float()
+    expected_reward = out["success"].float() - td["scm", "U"].norm(dim=-1, keepdim=True) * (1 + distance[:, None] / 25)
     torch.testing.assert_close(out["reward"], expected_reward)
 
 

@@ -105,8 +105,10 @@ def test_gusts_follow_the_process_and_push_the_rover():
     push = rollout["next", "P"] - rollout["P"]
     free = _gap_to_walls(rollout["P"], "large") > env.params.half_size + 0.05
     torch.testing.assert_close(push[free], env.params.gust_push * gust[free], atol=1e-5, rtol=0)
-    # and pays 1 per step plus the gust penalty
-    torch.testing.assert_close(rollout["next", "reward"], -1.0 - env.gust_penalty_weight * gust.norm(dim=-1, keepdim=True))
+    # and pays the paper's 1{success} - |U_t| (1 + d_t / 25), d_t in metres (4 per cell) after the step
+    metres = 4.0 * (rollout["next", "P"] - env.goal_position).norm(dim=-1, keepdim=True)
+    expected = rollout["next", "success"].float() - gust.norm(dim=-1, keepdim=True) * (1 + metres / 25)
+    torch.testing.assert_close(rollout["next", "reward"], expected)
 
 
 @pytest.mark.parametrize("strength", [0.0, 0.25, 0.5, 1.0])

@@ -15,7 +15,8 @@ from torchrl_causal.envs.base import (
     GustProcess,
     rotate,
 )
-from torchrl_causal.envs.experts import RoverExpert
+from torchrl_causal.envs.ant import AntLocomotionEnv
+from torchrl_causal.envs.experts import AntMazeExpert, RouteChoiceExpert, RoverExpert
 from torchrl_causal.envs.humanoidmaze import HumanoidMazeEnv
 from torchrl_causal.envs.planner import MAZE_MAPS, MazeLayout, MazePlanner
 from torchrl_causal.envs.route_choice import RouteChoiceEnv, route_choice_value
@@ -25,7 +26,9 @@ __all__ = [
     "MAZE_MAPS",
     "REGIMES",
     "ROVER_TASKS",
+    "AntLocomotionEnv",
     "AntMazeEnv",
+    "AntMazeExpert",
     "CompassSensor",
     "ConfoundedEnv",
     "GustConfoundedEnv",
@@ -34,6 +37,7 @@ __all__ = [
     "MazeLayout",
     "MazePlanner",
     "RouteChoiceEnv",
+    "RouteChoiceExpert",
     "RoverExpert",
     "RoverMazeEnv",
     "RoverParameters",

@@ -1,8 +1,10 @@
-"""Confounded AntMaze (the paper's Section 4 / Appendix D) on gymnasium-robotics' AntMaze.
+"""Confounded AntMaze (the paper's Section 4 / Appendix D): OGBench's ant in gymnasium-robotics' mazes.
 
-The 8-DoF ant of gymnasium's ``Ant`` (``ant.xml``: RK4, 0.01 s physics step, 5 physics
-steps per control step, so 20 Hz control as in ``AntMaze_*-v5``) walks a
-gymnasium-robotics maze (4 m cells) from a fixed start cell to a fixed goal cell.
+The 8-DoF ant of gymnasium's ``ant.xml`` with OGBench's physics
+(:func:`~torchrl_causal.envs.ant.ogbench_ant_physics`: RK4, 0.02 s physics step, 5 physics
+steps per control step so 10 Hz control, gear 30, soft contacts) walks a gymnasium-robotics
+maze (4 m cells, OGBench's ``antmaze-{medium,large}-navigate`` maps) from a fixed start cell
+to a fixed goal cell. A horizon of 1000 steps is 100 s of simulated time.
 """
 
 from __future__ import annotations
@@ -12,9 +14,16 @@ import pathlib
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, ClassVar
 
-import gymnasium
 import mujoco
 import numpy as np
+
+from torchrl_causal.envs.ant import (
+    ANT_XML,
+    OGBENCH_FRAME_SKIP,
+    OGBENCH_QPOS_NOISE,
+    OGBENCH_QVEL_NOISE,
+    ogbench_ant_physics,
+)
 from torchrl_causal.envs.mujoco_maze import MazeTask, MujocoMazeEnv
 from torchrl_causal.envs.templates import ANTMAZE_TEMPLATE
 
@@ -52,18 +61,21 @@ class AntMazeEnv(MujocoMazeEnv):
     (8), ``"W"`` compass (2), ``"action"`` = X, the 8 torques in ``[-1, 1]``. The imitator's
     V^O is these 27 state dims plus the previous action: 35 (the paper's table).
 
-    Mechanism: the gust U (``("scm", "U")``, DESIGN.md's process) pushes the torso with
-    its force in newtons (the ant weighs 0.91 kg) every step it blows; the compass is
+    Mechanism: the gust U (``("scm", "U")``: redrawn every 5 steps, blowing with
+    probability 0.05 at U[2, 5] N in a uniform direction) pushes the torso with its force
+    in newtons (the ant weighs 0.91 kg) every step it blows; the compass is
     ``tanh(0.9 (cos yaw, sin yaw) + 0.1 gust direction + N(0, 0.05²))``, rotated by
-    ``confounding_strength * pi`` in the deployment regime; the reward is ``-1`` per step
-    minus ``0.1 * |U|`` (the episode ends at success).
+    ``confounding_strength * pi`` in the deployment regime; the reward is
+    ``1{success} - |U_t| (1 + d_t / 25)`` with ``d_t`` the distance to the goal in metres
+    (the episode ends at success).
 
     Tasks (cells are ``(row, column)`` of gymnasium-robotics' ``MEDIUM_MAZE`` /
     ``LARGE_MAZE``): medium from (1, 1) to (6, 6), large from (1, 1) to (7, 10), the
     opposite corners. The start is the
     cell centre plus uniform noise of a quarter cell per axis (gymnasium-robotics'
-    AntMaze reset); success is the torso within 0.45 m (gymnasium-robotics' radius) of the
-    goal cell's centre and ends the episode; horizon 1000.
+    AntMaze reset), the other coordinates get OGBench's reset noise (uniform 0.1 on qpos,
+    N(0, 0.1²) on qvel); success is the torso within ``success_radius`` of the goal cell's
+    centre and ends the episode; horizon 1000.
 
     Examples:
         >>> env = AntMazeEnv("medium", batch_size=2, seed=0)
@@ -72,8 +84,10 @@ class AntMazeEnv(MujocoMazeEnv):
         (torch.Size([2, 3, 3]), torch.Size([2, 3, 4]), torch.Size([2, 3, 8]))
     """
 
-    agent_xml: ClassVar[pathlib.Path] = pathlib.Path(gymnasium.__file__).parent / "envs/mujoco/assets/ant.xml"
-    frame_skip: ClassVar[int] = 5
+    agent_xml: ClassVar[pathlib.Path] = ANT_XML
+    frame_skip: ClassVar[int] = OGBENCH_FRAME_SKIP
+    qpos_noise: ClassVar[float] = OGBENCH_QPOS_NOISE
+    qvel_noise_std: ClassVar[float] = OGBENCH_QVEL_NOISE
     variable_columns: ClassVar[Mapping[str, slice]] = {
         "P": slice(0, 3),
         "O": slice(3, 7),
@@ -89,6 +103,10 @@ class AntMazeEnv(MujocoMazeEnv):
         "large": MazeTask("large", start_cell=(1, 1), goal_cell=(7, 10)),
     }
     default_horizon: ClassVar[int] = 1000
+
+    @classmethod
+    def _edit_spec(cls, spec: mujoco.MjSpec) -> None:
+        ogbench_ant_physics(spec)
 
     @property
     def causal_template(self) -> TimeSliceTemplate:

@@ -371,12 +371,13 @@ class GustConfoundedEnv(ConfoundedEnv):
     Class attributes:
         gust_process: the :class:`GustProcess` (period 5, p = 0.05, magnitude U[2, 5]).
         compass: the :class:`CompassSensor` (0.9 signal + 0.1 gust direction + N(0, 0.05²)).
-        gust_penalty_weight: reward penalty per unit of gust magnitude per step.
+        metres_per_unit: metres per world unit of the env's positions, so that the
+            distance term of :meth:`maze_reward` reads at the MuJoCo mazes' scale.
     """
 
     gust_process: GustProcess = GustProcess()
     compass: CompassSensor = CompassSensor()
-    gust_penalty_weight: float = 0.1
+    metres_per_unit: float = 1.0
 
     @property
     def compass_rotation(self) -> float:
@@ -403,9 +404,24 @@ class GustConfoundedEnv(ConfoundedEnv):
         """W for the true unit ``signal`` under the current gust and regime."""
         return self.compass.read(signal, self.gust, rotation=self.compass_rotation, generator=self.rng)
 
-    def gust_penalty(self) -> torch.Tensor:
-        """Reward penalty of the current gust, ``batch + (1,)``."""
-        return self.gust_penalty_weight * self.gust_process.exposure(self.gust)
+    def maze_reward(self, success: torch.Tensor, distance: torch.Tensor) -> torch.Tensor:
+        """The maze suite's per-step reward ``1{success} - |U_t| (1 + d_t / 25)``, ``batch + (1,)``.
+
+        ``U_t`` is the gust blowing during the step and ``d_t`` the distance to the goal
+        (world units, converted to metres by :attr:`metres_per_unit`) at the step's end.
+        Summed over an episode this is the paper's raw E[Y]: about -370 for a 1000-step
+        failure (the gust blows 5% of the time at 3.5 on average), near -100 for an
+        expert that succeeds in ~300 steps.
+
+        Examples:
+            >>> from torchrl_causal.envs import RoverMazeEnv  # 4 m per cell
+            >>> env = RoverMazeEnv(batch_size=(2,), seed=0)
+            >>> env.gust = torch.tensor([[3.0, 4.0], [0.0, 0.0]])
+            >>> env.maze_reward(torch.tensor([[False], [True]]), torch.tensor([[6.25], [0.0]])).tolist()
+            [[-10.0], [1.0]]
+        """
+        metres = distance * self.metres_per_unit
+        return success.to(self.gust.dtype) - self.gust_process.exposure(self.gust) * (1.0 + metres / 25.0)
 
     def scm_observation(self) -> dict[str, dict[str, torch.Tensor]]:
         """The ``("scm", "U")`` entry (diagnostics only: no agent may read it)."""

@@ -3,15 +3,35 @@
 from __future__ import annotations
 
 import math
+import pathlib
 
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
+from torchrl_causal.envs.ant import LOCOMOTION_WEIGHTS, load_locomotion_network, locomotion_observation
+from torchrl_causal.envs.antmaze import AntMazeEnv
 from torchrl_causal.envs.planner import MazePlanner
 from torchrl_causal.envs.rover_maze import RoverMazeEnv, RoverParameters
 
-__all__ = ["RouteChoiceExpert", "RoverExpert"]
+__all__ = ["AntMazeExpert", "RouteChoiceExpert", "RoverExpert"]
+
+
+class _ActionNoise:
+    """DART-style Gaussian action noise (then clipping to ``[-1, 1]``) with its own generator."""
+
+    def __init__(self, std: float, seed: int | None, device: torch.device | str | None) -> None:
+        if std < 0:
+            raise ValueError(f"noise_std must be >= 0, got {std}")
+        self.std = std
+        self.rng = torch.Generator(device=device)
+        self.rng.manual_seed(int(torch.randint(0, 2**62, ()).item()) if seed is None else seed)
+
+    def __call__(self, action: torch.Tensor) -> torch.Tensor:
+        if self.std == 0:
+            return action
+        noise = torch.randn(action.shape, generator=self.rng, device=action.device, dtype=action.dtype)
+        return (action + self.std * noise).clamp(-1.0, 1.0)
 
 
 class RoverExpert(TensorDictModuleBase):
@@ -63,14 +83,10 @@ class RoverExpert(TensorDictModuleBase):
         super().__init__()
         if not 0.0 <= min_throttle <= 1.0:
             raise ValueError(f"min_throttle must lie in [0, 1], got {min_throttle}")
-        if noise_std < 0:
-            raise ValueError(f"noise_std must be >= 0, got {noise_std}")
         self.params: RoverParameters = env.params
         self.min_throttle = min_throttle
-        self.noise_std = noise_std
         self.turn_gain = turn_gain
-        self.rng = torch.Generator(device=env.device)
-        self.rng.manual_seed(int(torch.randint(0, 2**62, ()).item()) if seed is None else seed)
+        self.noise = _ActionNoise(noise_std, seed, env.device)
         self.planner = MazePlanner(
             env.layout, env.goal_cell, lookahead=lookahead, clearance=env.params.half_size + margin
         )
@@ -83,11 +99,66 @@ class RoverExpert(TensorDictModuleBase):
         error = torch.remainder(desired - torch.atan2(cos_sin[..., 1:], cos_sin[..., :1]) + math.pi, 2 * math.pi) - math.pi
         turn = (self.turn_gain * error / self.params.turn_rate).clamp(-1.0, 1.0)
         throttle = torch.cos(error).clamp(self.min_throttle, 1.0)
-        action = torch.cat((throttle, turn), dim=-1)
-        if self.noise_std > 0:
-            noise = torch.randn(action.shape, generator=self.rng, device=action.device, dtype=action.dtype)
-            action = (action + self.noise_std * noise).clamp(-1.0, 1.0)
-        tensordict.set("action", action)
+        tensordict.set("action", self.noise(torch.cat((throttle, turn), dim=-1)))
+        return tensordict
+
+
+class AntMazeExpert(TensorDictModuleBase):
+    """The Confounded AntMaze expert: planner waypoints steering a trained locomotion skill.
+
+    As OGBench built its maze experts: :class:`MazePlanner` (BFS over the maze's cells,
+    the furthest path cell in clear line of sight within ``lookahead`` cells) gives a
+    waypoint, the unit vector from the torso to it is the commanded direction, and the
+    locomotion policy trained by ``python -m torchrl_causal.trainers.locomotion``
+    (:data:`~torchrl_causal.envs.ant.LOCOMOTION_WEIGHTS`, shipped with the package) turns
+    the ant's proprioception and that direction into torques (its deterministic action,
+    ``tanh`` of the Gaussian mean). It reads the true orientation ``("latent", "O")``,
+    never the compass ``W``, so its behaviour is the same in both regimes.
+
+    Args:
+        env: the :class:`~torchrl_causal.envs.AntMazeEnv` to solve (its maze and goal are read once).
+        lookahead: path cells the planner may look ahead.
+        clearance: half-size (m) of the box a line of sight must pass.
+        noise_std: DART-style Gaussian action noise (0: the deterministic expert).
+        seed: seed of the noise generator.
+        weights: path of the locomotion state dict.
+
+    Examples:
+        >>> env = AntMazeEnv("medium", batch_size=2, seed=0)
+        >>> expert = AntMazeExpert(env)
+        >>> env.rollout(3, expert)["action"].shape
+        torch.Size([2, 3, 8])
+    """
+
+    in_keys = ["P", ("latent", "O"), "A", "L", "T", "J"]
+    out_keys = ["action"]
+
+    def __init__(
+        self,
+        env: AntMazeEnv,
+        *,
+        lookahead: int = 3,
+        clearance: float = 1.0,
+        noise_std: float = 0.0,
+        seed: int | None = None,
+        weights: str | pathlib.Path = LOCOMOTION_WEIGHTS,
+    ) -> None:
+        super().__init__()
+        if not isinstance(env, AntMazeEnv):
+            raise TypeError(f"AntMazeExpert drives an AntMazeEnv, got {type(env).__name__}")
+        self.planner = MazePlanner(env.layout, env.task.goal_cell, lookahead=lookahead, clearance=clearance)
+        self.locomotion = load_locomotion_network(weights).to(env.device)
+        self.noise = _ActionNoise(noise_std, seed, env.device)
+
+    @torch.no_grad()
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        position = tensordict.get("P")
+        to_waypoint = self.planner.waypoint(position[..., :2]) - position[..., :2]
+        direction = to_waypoint / to_waypoint.norm(dim=-1, keepdim=True).clamp_min(1e-6)
+        qpos_tail = torch.cat((position[..., 2:], tensordict.get(("latent", "O")), tensordict.get("A")), dim=-1)
+        qvel = torch.cat([tensordict.get(key) for key in ("L", "T", "J")], dim=-1)
+        mean = self.locomotion(locomotion_observation(qpos_tail, qvel, direction))[..., :8]
+        tensordict.set("action", self.noise(torch.tanh(mean)))
         return tensordict
 
 

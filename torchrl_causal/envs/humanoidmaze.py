@@ -93,7 +93,8 @@ class HumanoidMazeEnv(MujocoMazeEnv):
         "large": MazeTask("large", start_cell=(1, 1), goal_cell=(7, 10)),
     }
     default_horizon: ClassVar[int] = 2000
-    reset_noise_scale: ClassVar[float] = 0.01
+    qpos_noise: ClassVar[float] = 0.01
+    qvel_noise_std: ClassVar[float] = 0.01
 
     @property
     def causal_template(self) -> TimeSliceTemplate:

@@ -8,8 +8,8 @@ constants) and steps a batch of independent :class:`mujoco.MjData` over one comp
 :class:`MujocoMazeEnv` is the SCM layer on top: a
 :class:`~torchrl_causal.envs.base.GustConfoundedEnv` whose gust pushes the agent's torso
 through ``MjData.xfrc_applied`` every step it blows, whose sensor ``W`` is read from the
-agent's state, and whose reward is ``-1`` per step (until success ends the episode) minus
-the gust penalty.
+agent's state, and whose reward is the maze suite's ``1{success} - |U_t| (1 + d_t / 25)``
+(:meth:`~torchrl_causal.envs.GustConfoundedEnv.maze_reward`; success ends the episode).
 A subclass only names its agent (MJCF, frame skip, variables and how to read them).
 """
 
@@ -33,7 +33,7 @@ from torchrl.data import Bounded, TensorSpec, Unbounded
 from torchrl_causal.envs.base import GustConfoundedEnv, Regime
 from torchrl_causal.envs.planner import MAZE_MAPS, MazeLayout
 
-__all__ = ["MAZE_HEIGHT", "MAZE_SIZE_SCALING", "MazeSimulator", "MazeTask", "MujocoMazeEnv", "OffscreenRenderer"]
+__all__ = ["MAZE_HEIGHT", "MAZE_SIZE_SCALING", "BatchedSimulation", "MazeSimulator", "MazeTask", "MujocoMazeEnv", "OffscreenRenderer"]
 
 #: Side of one maze cell in metres and wall height in cells (gymnasium-robotics AntMaze).
 MAZE_SIZE_SCALING = 4.0
@@ -140,14 +140,83 @@ class OffscreenRenderer:
         self._context.free()
 
 
-class MazeSimulator:
+class BatchedSimulation:
+    """A batch of independent MuJoCo simulations of one compiled model.
+
+    Each batch element owns an :class:`mujoco.MjData`; :meth:`step` sets the controls and
+    a planar external force on one body, then advances ``frame_skip`` physics steps.
+
+    Args:
+        model: the compiled model.
+        num_envs: number of independent simulations.
+        frame_skip: physics steps per control step.
+        pushed_body: the body that :meth:`step`'s external force pushes.
+
+    Examples:
+        >>> import gymnasium, pathlib
+        >>> ant = pathlib.Path(gymnasium.__file__).parent / "envs/mujoco/assets/ant.xml"
+        >>> sim = BatchedSimulation(mujoco.MjModel.from_xml_path(str(ant)), num_envs=2, frame_skip=5)
+        >>> sim.reset(np.array([0, 1]), sim.model.qpos0[None].repeat(2, 0), np.zeros((2, sim.model.nv)))
+        >>> sim.step(np.zeros((2, sim.model.nu)), np.zeros((2, 2)))
+        >>> sim.qpos().shape
+        (2, 15)
+    """
+
+    def __init__(self, model: mujoco.MjModel, *, num_envs: int, frame_skip: int, pushed_body: str = "torso") -> None:
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        if frame_skip < 1:
+            raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
+        self.frame_skip = frame_skip
+        self.model = model
+        self.datas = [mujoco.MjData(model) for _ in range(num_envs)]
+        self.torso_id = model.body(pushed_body).id
+
+    @property
+    def num_envs(self) -> int:
+        return len(self.datas)
+
+    @property
+    def control_dt(self) -> float:
+        """Simulated seconds per control step (``frame_skip`` physics steps)."""
+        return self.frame_skip * self.model.opt.timestep
+
+    def reset(self, indices: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
+        """Puts the simulations ``indices`` in state ``(qpos[k], qvel[k])``, at rest otherwise."""
+        for k, index in enumerate(indices):
+            data = self.datas[index]
+            mujoco.mj_resetData(self.model, data)
+            data.qpos[:] = qpos[k]
+            data.qvel[:] = qvel[k]
+            mujoco.mj_forward(self.model, data)
+
+    def step(self, ctrl: np.ndarray, torso_force: np.ndarray) -> None:
+        """One control step of every simulation: ``ctrl`` is ``(n, nu)``, ``torso_force`` ``(n, 2)``.
+
+        The planar force (world frame, newtons) is applied at the pushed body's centre of
+        mass during every physics substep; a zero force (calm) clears the previous one.
+        """
+        model, torso, frame_skip = self.model, self.torso_id, self.frame_skip
+        for data, control, force in zip(self.datas, ctrl, torso_force):
+            data.ctrl[:] = control
+            data.xfrc_applied[torso, :2] = force
+            mujoco.mj_step(model, data, nstep=frame_skip)
+
+    def qpos(self) -> np.ndarray:
+        """A fresh ``(n, nq)`` copy of the generalised positions."""
+        return np.stack([data.qpos for data in self.datas])
+
+    def qvel(self) -> np.ndarray:
+        """A fresh ``(n, nv)`` copy of the generalised velocities."""
+        return np.stack([data.qvel for data in self.datas])
+
+
+class MazeSimulator(BatchedSimulation):
     """A batch of MuJoCo simulations of one agent in one maze.
 
     The MJCF is the agent's model with the maze walls and a goal site added by
     gymnasium-robotics' ``Maze.make_maze``; ``edit_spec`` may adjust it (through
-    :class:`mujoco.MjSpec`) before compilation. Each batch element owns an
-    :class:`mujoco.MjData`; :meth:`step` sets the controls and the external force on the
-    torso, then advances ``frame_skip`` physics steps.
+    :class:`mujoco.MjSpec`) before compilation.
 
     Args:
         agent_xml: path of the agent's MJCF (must contain a body named ``torso_body``).
@@ -163,10 +232,6 @@ class MazeSimulator:
         >>> sim = MazeSimulator(ant, MazeTask("medium", (1, 1), (6, 6)), num_envs=2, frame_skip=5)
         >>> sim.cell_xy((1, 1)).tolist()
         [-10.0, 10.0]
-        >>> sim.reset(np.array([0, 1]), sim.model.qpos0[None].repeat(2, 0), np.zeros((2, sim.model.nv)))
-        >>> sim.step(np.zeros((2, sim.model.nu)), np.zeros((2, 2)))
-        >>> sim.qpos().shape
-        (2, 15)
     """
 
     def __init__(
@@ -179,12 +244,7 @@ class MazeSimulator:
         torso_body: str = "torso",
         edit_spec: SpecEdit | None = None,
     ) -> None:
-        if num_envs < 1:
-            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
-        if frame_skip < 1:
-            raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
         self.task = task
-        self.frame_skip = frame_skip
         self.maze, xml_path = Maze.make_maze(str(agent_xml), task.maze_map, MAZE_SIZE_SCALING, MAZE_HEIGHT)
         try:
             spec = mujoco.MjSpec.from_file(xml_path)
@@ -193,43 +253,12 @@ class MazeSimulator:
         spec.site("target").pos = [*self.cell_xy(task.goal_cell), MAZE_HEIGHT / 2 * MAZE_SIZE_SCALING]
         if edit_spec is not None:
             edit_spec(spec)
-        self.model = spec.compile()
-        self.datas = [mujoco.MjData(self.model) for _ in range(num_envs)]
-        self.torso_id = self.model.body(torso_body).id
+        super().__init__(spec.compile(), num_envs=num_envs, frame_skip=frame_skip, pushed_body=torso_body)
         self._renderer: OffscreenRenderer | None = None
-
-    @property
-    def num_envs(self) -> int:
-        return len(self.datas)
 
     def cell_xy(self, cell: Sequence[int]) -> np.ndarray:
         """World ``(x, y)`` of a cell's centre."""
         return self.maze.cell_rowcol_to_xy(np.asarray(cell))
-
-    def reset(self, indices: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
-        """Puts the simulations ``indices`` in state ``(qpos[k], qvel[k])``, at rest otherwise."""
-        for k, index in enumerate(indices):
-            data = self.datas[index]
-            mujoco.mj_resetData(self.model, data)
-            data.qpos[:] = qpos[k]
-            data.qvel[:] = qvel[k]
-            mujoco.mj_forward(self.model, data)
-
-    def step(self, ctrl: np.ndarray, torso_force: np.ndarray) -> None:
-        """One control step of every simulation: ``ctrl`` is ``(n, nu)``, ``torso_force`` ``(n, 2)``.
-
-        The planar force (world frame, newtons) is applied at the torso's centre of mass
-        during every physics substep; a zero force (calm) clears the previous one.
-        """
-        model, torso, frame_skip = self.model, self.torso_id, self.frame_skip
-        for data, control, force in zip(self.datas, ctrl, torso_force):
-            data.ctrl[:] = control
-            data.xfrc_applied[torso, :2] = force
-            mujoco.mj_step(model, data, nstep=frame_skip)
-
-    def qpos(self) -> np.ndarray:
-        """A fresh ``(n, nq)`` copy of the generalised positions."""
-        return np.stack([data.qpos for data in self.datas])
 
     def render(self, index: int, *, width: int, height: int, camera: mujoco.MjvCamera) -> np.ndarray:
         """An RGB frame ``(height, width, 3)`` (uint8) of simulation ``index``, offscreen."""
@@ -303,8 +332,10 @@ class MujocoMazeEnv(GustConfoundedEnv):
     tasks: ClassVar[Mapping[str, MazeTask]]
     #: uniform start-position noise, as a fraction of a cell (gymnasium-robotics: 0.25).
     start_noise: ClassVar[float] = 0.25
-    #: uniform noise on the other initial ``qpos`` entries and std of the initial ``qvel``.
-    reset_noise_scale: ClassVar[float] = 0.0
+    #: half-width of the uniform noise on the other initial ``qpos`` entries.
+    qpos_noise: ClassVar[float] = 0.0
+    #: standard deviation of the Gaussian initial ``qvel``.
+    qvel_noise_std: ClassVar[float] = 0.0
     default_success_radius: ClassVar[float] = 0.45
     default_horizon: ClassVar[int] = 1000
 
@@ -396,18 +427,16 @@ class MujocoMazeEnv(GustConfoundedEnv):
         if indices.size == 0:
             return
         model = self.simulator.model
-        noise = torch.rand((indices.size, model.nq + model.nv + 2), generator=self.rng, dtype=torch.float64)
-        noise = noise.numpy() * 2 - 1
-        qpos = model.qpos0 + self.reset_noise_scale * noise[:, : model.nq]
-        qpos[:, :2] = self._start_xy + self.start_noise * MAZE_SIZE_SCALING * noise[:, -2:]
-        qvel = self.reset_noise_scale * noise[:, model.nq : model.nq + model.nv]
+        uniform = torch.rand((indices.size, model.nq + 2), generator=self.rng, dtype=torch.float64).numpy() * 2 - 1
+        gaussian = torch.randn((indices.size, model.nv), generator=self.rng, dtype=torch.float64).numpy()
+        qpos = model.qpos0 + self.qpos_noise * uniform[:, : model.nq]
+        qpos[:, :2] = self._start_xy + self.start_noise * MAZE_SIZE_SCALING * uniform[:, -2:]
+        qvel = self.qvel_noise_std * gaussian
         self.simulator.reset(indices, qpos, qvel)
         for index in indices:
             self._read_state(self.simulator.datas[index], self._state[index])
 
     def _transition(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        # Every step costs 1 (the episode ends at success) plus the gust U_t blowing during it.
-        reward = -1.0 - self.gust_penalty()
         ctrl = action.detach().reshape(self.simulator.num_envs, -1).cpu().numpy()
         force = self.gust.reshape(self.simulator.num_envs, 2).cpu().numpy()
         self.simulator.step(ctrl, force)
@@ -416,8 +445,10 @@ class MujocoMazeEnv(GustConfoundedEnv):
             self._read_state(data, row)
         x, y = self.variable_columns["P"].start, self.variable_columns["P"].start + 1
         distance = np.hypot(state[:, x] - self._goal_xy[0], state[:, y] - self._goal_xy[1])
-        success = torch.from_numpy(distance <= self.success_radius).to(self.device).reshape(self._success.shape)
-        return reward, success
+        distance = torch.from_numpy(distance.astype(np.float32)).to(self.device).reshape(self._success.shape)
+        success = distance <= self.success_radius
+        # The reward of step t pays for the gust U_t that blew during it.
+        return self.maze_reward(success, distance), success
 
     def _observation(self) -> dict[str, object]:
         state = self._torch(self._state)

@@ -10,8 +10,9 @@ The rover mirrors the Confounded AntMaze mechanism at a fraction of the cost (no
 * the gust process of DESIGN.md (:class:`~torchrl_causal.envs.GustProcess`) pushes the
   rover, costs reward, and contaminates the compass W (0.9 heading + 0.1 gust direction +
   noise, tanh-bounded, rotated by ``confounding_strength * pi`` when deployed);
-* the reward is ``-1 - 0.1 |U_t|`` per step; coming within 0.5 cells of the goal centre
-  ends the episode (success).
+* the reward is the maze suite's ``1{success} - |U_t| (1 + d_t / 25)`` per step, with the
+  distance ``d_t`` to the goal counted at 4 m per cell (the AntMaze scale), so raw returns
+  read as the paper's; coming within 0.5 cells of the goal centre ends the episode (success).
 
 The imitator observes P, L and W (and its own past actions); the heading O is latent
 (under ``("latent", "O")`` as ``(cos, sin)``, for experts only). L is a scalar on purpose:
@@ -158,6 +159,9 @@ class RoverMazeEnv(GustConfoundedEnv):
         ['O']
     """
 
+    #: a rover cell stands for one 4 m AntMaze cell in the reward's distance term.
+    metres_per_unit: float = 4.0
+
     def __init__(self, maze: str = "medium", *, horizon: int = 1000, params: RoverParameters | None = None, **kwargs) -> None:
         if maze not in ROVER_TASKS:
             raise ValueError(f"unknown maze {maze!r}; expected one of {sorted(ROVER_TASKS)}")
@@ -205,7 +209,7 @@ class RoverMazeEnv(GustConfoundedEnv):
             observed=("P", "L", "W", "X"),
             directed=directed,
             bidirected=bidirected,
-            reward_parents=("P",),  # -1 per step until P is within the goal radius
+            reward_parents=("P",),  # the goal indicator and the distance term
             reward_bidirected=("P", "W"),  # the gust penalty shares U with the push and the compass
         )
 
@@ -234,16 +238,16 @@ class RoverMazeEnv(GustConfoundedEnv):
         self.speed = torch.where(mask, 0.0, self.speed)
 
     def _transition(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        # The reward of step t pays for the gust U_t that blows during it.
-        reward = -1.0 - self.gust_penalty()
         slip = None
         if self.params.heading_noise > 0:
             slip = self.params.heading_noise * torch.randn(self.heading.shape, generator=self.rng, device=self.device)
         self.position, self.heading, self.speed = rover_dynamics(
             self.position, self.heading, self.speed, action, self.gust, self.layout, self.params, slip
         )
-        success = (self.position - self.goal_position).norm(dim=-1, keepdim=True) < self.params.goal_radius
-        return reward, success
+        distance = (self.position - self.goal_position).norm(dim=-1, keepdim=True)
+        success = distance < self.params.goal_radius
+        # The reward of step t pays for the gust U_t that blows during it.
+        return self.maze_reward(success, distance), success
 
     def _observation(self) -> dict[str, object]:
         heading = unit_heading(self.heading)

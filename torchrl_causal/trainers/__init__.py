@@ -44,7 +44,19 @@ TRAINERS: dict[str, type[Trainer]] = {
 
 
 def make_trainer(cfg: DictConfig) -> Trainer:
-    """The trainer named by ``cfg.algo.trainer``."""
+    """The trainer named by ``cfg.algo.trainer``.
+
+    Raises:
+        ValueError: for an unknown trainer, or an env without an expert (``env.expert: null``,
+            e.g. HumanoidMaze): every algorithm needs one, for its demonstrations or its row.
+    """
+    if cfg.env.get("expert") is None:
+        raise ValueError(
+            f"env {cfg.env.name!r} has no expert (env.expert is null), and every algorithm needs one "
+            "(demonstrations, or the expert row). HumanoidMaze's expert needs OGBench's humanoid locomotion "
+            "skill (~40M env steps), which this library does not ship yet; pass your own with "
+            "env.expert._target_=<module.Class taking the env>."
+        )
     name = cfg.algo.trainer
     if name not in TRAINERS:
         raise ValueError(f"algo.trainer must be one of {sorted(TRAINERS)}, got {name!r}")
