@@ -9,13 +9,23 @@ written independently of the transform's buffers.
 from __future__ import annotations
 
 import io
+from dataclasses import replace
 
 import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from tensordict import TensorDict, TensorDictBase
-from torchrl.data import Bounded, Composite, Unbounded
+from torchrl.data import (
+    Bounded,
+    Composite,
+    LazyTensorStorage,
+    RandomSampler,
+    ReplayBuffer,
+    SamplerWithoutReplacement,
+    SliceSampler,
+    Unbounded,
+)
 from torchrl.envs import Compose, EnvBase, InitTracker, SerialEnv, TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
@@ -66,6 +76,7 @@ class CountingEnv(EnvBase):
             "V": Unbounded(shape=(*batch, 1)),
             "W": Bounded(1000.0, 2000.0, shape=(*batch, 1)),
             "latent": Composite(O=Unbounded(shape=(*batch, 1)), shape=batch),
+            "scm": Composite(U=Unbounded(shape=(*batch, 1)), shape=batch),  # the confounder
         }
         specs.pop(drop, None)
         self.observation_spec = Composite(specs, shape=batch)
@@ -74,7 +85,8 @@ class CountingEnv(EnvBase):
 
     def _observe(self) -> TensorDict:
         t, i = self.t, self.index
-        values = {"P": p_value(t, i), "V": v_value(t, i), "W": w_value(t, i), ("latent", "O"): -t.unsqueeze(-1)}
+        values = {"P": p_value(t, i), "V": v_value(t, i), "W": w_value(t, i), ("latent", "O"): -t.unsqueeze(-1),
+                  ("scm", "U"): 7 * t.unsqueeze(-1)}
         keys = set(self.observation_spec.keys(True, True))
         return TensorDict({key: v for key, v in values.items() if key in keys}, batch_size=self.batch_size)
 
@@ -172,9 +184,18 @@ def test_single_env_exact_tensors_with_zero_padding():
         rtol=0,
         atol=0,
     )
-    assert "W" not in rollout.keys() and "latent" not in rollout.keys()
-    assert "W" not in rollout["next"].keys() and "latent" not in rollout["next"].keys()
-    assert "P" in rollout.keys() and "V" in rollout["next"].keys()
+    # exactly what the imitator's collector stores: no W, no latent, no confounder
+    remaining = {"observation", "P", "V", "action", "done", "terminated"}
+    assert set(rollout.keys()) == remaining | {"next"}
+    assert set(rollout["next"].keys()) == remaining - {"action"} | {"reward"}
+    assert set(env.observation_spec.keys()) == {"observation", "P", "V"}
+
+
+def test_observed_variables_outside_the_window_are_hidden_too():
+    window = AdjustmentWindow(k=1, action="X", lags={"P": (0,), "X": (1,)}, observed=("P", "V", "W", "X"))
+    env = TransformedEnv(CountingEnv([3]), CausalWindowTransform(window))
+    assert set(env.observation_spec.keys()) == {"observation", "P"}
+    assert not {"V", "W", "latent", "scm"} & set(env.rollout(2, counting_policy).keys())
 
 
 @pytest.mark.parametrize("window", [CAUSAL, NONCAUSAL, MATCHED], ids=["causal", "noncausal", "matched"])
@@ -260,14 +281,17 @@ def test_offline_encoding_equals_online_on_random_episodes(data):
     torch.testing.assert_close(batched["observation"], online["observation"], rtol=0, atol=0)
 
 
-def test_forward_encodes_like_encode_trajectories_and_hides_keys():
+def test_encode_trajectories_hides_keys_and_calling_the_transform_on_a_batch_is_refused():
     env = TransformedEnv(CountingEnv([3, 4]), InitTracker())
     rollout = env.rollout(7, counting_policy, break_when_any_done=False).reshape(-1)
     transform = CausalWindowTransform(CAUSAL)
-    encoded = transform(rollout.clone())
-    assert not {"W", "latent"} & set(encoded.keys()) and not {"W", "latent"} & set(encoded["next"].keys())
+    encoded = transform.encode_trajectories(rollout)
+    for level in (encoded, encoded["next"]):
+        assert not {"W", "latent", "scm"} & set(level.keys())
     for row, t in enumerate([s % 3 for s in range(7)] + [s % 4 for s in range(7)]):
         torch.testing.assert_close(encoded["observation"][row], expected_encoding(CAUSAL, t, row // 7), rtol=0, atol=0)
+    with pytest.raises(RuntimeError, match="encode_trajectories.*make_rb_transform_and_sample_unit"):
+        transform(rollout)
 
 
 # --------------------------------------------------------------------------- specs and batched envs
@@ -335,6 +359,23 @@ def make_transformed_counting_env() -> TransformedEnv:
     return TransformedEnv(CountingEnv(3), CausalWindowTransform(CAUSAL))
 
 
+def make_counting_env() -> CountingEnv:
+    return CountingEnv(3)
+
+
+class CollidingEnv(CountingEnv):
+    """CountingEnv whose W also drives P: a different template, the same specs."""
+
+    @property
+    def causal_template(self) -> TimeSliceTemplate:
+        template = super().causal_template
+        return replace(template, directed=(*template.directed, ("W", "P", 1)))
+
+
+def make_colliding_env() -> CollidingEnv:
+    return CollidingEnv(3)
+
+
 @pytest.mark.slow
 def test_parallel_env_workers_encode():
     from torchrl.envs import ParallelEnv
@@ -344,8 +385,41 @@ def test_parallel_env_workers_encode():
         rollout = env.rollout(5, counting_policy, break_when_any_done=False)
         for s in range(5):
             torch.testing.assert_close(rollout["observation"][0, s], expected_encoding(CAUSAL, s % 3, 0), rtol=0, atol=0)
+        # a running ParallelEnv: the template comes from the workers
+        assert CausalWindowTransform.from_env(env, K).window == CausalWindowTransform.from_env(CountingEnv(3), K).window
     finally:
         env.close()
+    assert CausalWindowTransform.from_env(env, K).window.lags == {"P": (0, 1, 2), "V": (0, 1, 2), "X": (1, 2)}
+    assert env.is_closed
+
+
+def test_from_env_reads_the_template_of_batched_envs_started_or_not(monkeypatch):
+    from torchrl.envs import ParallelEnv
+
+    expected = CausalWindowTransform.from_env(CountingEnv(3), K).window
+    env = SerialEnv(3, make_counting_env)
+    built = []
+    monkeypatch.setattr(CountingEnv, "close", lambda self, **kwargs: built.append(self))
+    for stage in ("not started", "running", "closed"):
+        if stage == "running":
+            env.reset()
+        elif stage == "closed":
+            env.close()
+        built.clear()
+        assert CausalWindowTransform.from_env(env, K).window == expected, stage
+        assert CausalWindowTransform.from_env(TransformedEnv(env, InitTracker()), K).window == expected, stage
+        # a batched env that is not running is not started: one env per distinct constructor (one
+        # per call here), closed after
+        assert len(built) == (0 if stage == "running" else 2) and env.is_closed == (stage != "running")
+    parallel = ParallelEnv(2, make_counting_env)  # not started: no worker process is spawned
+    assert CausalWindowTransform.from_env(parallel, K).window == expected and parallel.is_closed
+
+    mixed = SerialEnv(2, [make_counting_env, make_colliding_env])
+    for stage in ("not started", "running"):
+        with pytest.raises(ValueError, match="sub-env 1 of SerialEnv has another causal template than sub-env 0"):
+            CausalWindowTransform.from_env(mixed, K)
+        mixed.reset()
+    mixed.close()
 
 
 def test_collector_batches_carry_the_encoding():
@@ -470,9 +544,13 @@ def test_discrete_specs_give_their_integer_ranges():
 
 
 def test_include_current_false_keeps_only_past_steps():
-    window = AdjustmentWindow(k=2, action="X", lags={"P": (0, 1, 2), "X": (1, 2)}, observed=("P", "W", "X"))
+    window = AdjustmentWindow(k=2, action="X", lags={"P": (0, 1, 2), "V": (0,), "X": (1, 2)}, exact=True,
+                              observed=("P", "V", "W", "X"))
     transform = CausalWindowTransform(window, include_current=False)
-    assert transform.window.lags == {"P": (1, 2), "X": (1, 2)}
+    assert transform.window == window.past_only()
+    assert transform.window.lags == {"P": (1, 2), "X": (1, 2)}  # V had lag 0 only: gone
+    assert not transform.window.exact  # the smaller sets were not checked
+    assert window.past_only().past_only() == window.past_only()
     episode = TensorDict(
         {"P": torch.tensor([[1.0], [2.0], [3.0]]), "W": torch.zeros(3, 1),
          "action": torch.tensor([[10.0], [20.0], [30.0]]),
@@ -491,7 +569,115 @@ def test_causal_false_conditions_on_every_observed_variable_at_the_window_lags()
         observed=("P", "W", "X"),
     )
     twin = CausalWindowTransform(window, causal=False).window
+    assert twin == window.non_causal_twin()
     assert twin.lags == {"P": (0, 1, 2), "W": (0, 1, 2), "X": (1, 2)}
     assert twin.excluded == frozenset() and not twin.exact
+    sparse = AdjustmentWindow(k=3, action="X", lags={"P": (0, 3), "X": (2,)}, excluded=frozenset({"W"}), exact=True,
+                              observed=("P", "W", "X"))
+    # the union of the state lags for every observed state variable, the action at 1..k
+    assert sparse.non_causal_twin().lags == {"P": (0, 3), "W": (0, 3), "X": (1, 2, 3)}
     with pytest.raises(ValueError, match="observed"):
         CausalWindowTransform(AdjustmentWindow(k=1, action="X", lags={"P": (0,)}), causal=False)
+
+
+# --------------------------------------------------------------------------- replay buffers
+
+
+def raw_transitions(lengths=(2, 3, 4, 5), steps=12) -> TensorDictBase:
+    """CountingEnv transitions as a buffer stores them: flat, each env's row in time order."""
+    env = TransformedEnv(CountingEnv(lengths), InitTracker())
+    return env.rollout(steps, counting_policy, break_when_any_done=False).reshape(-1)
+
+
+def rows_right(batch: TensorDictBase, window: AdjustmentWindow = CAUSAL) -> int:
+    """How many rows hold the closed-form encoding of their own (t, i), read back from P."""
+    t, i = (batch["P"][:, 0] - 1).long().tolist(), (batch["P"][:, 1] - 1).long().tolist()
+    expected = torch.stack([expected_encoding(window, a, b) for a, b in zip(t, i)])
+    expected_next = torch.stack([expected_encoding(window, a + 1, b) for a, b in zip(t, i)])
+    right = (batch["observation"] == expected).all(-1) & (batch["next", "observation"] == expected_next).all(-1)
+    return int(right.sum())
+
+
+REPLAY_SAMPLERS = {
+    "random": lambda: RandomSampler(),
+    "without_replacement": lambda: SamplerWithoutReplacement(),
+    "slices": lambda: SliceSampler(slice_len=4, end_key=("next", "done")),
+}
+
+
+@pytest.mark.parametrize("sampler", list(REPLAY_SAMPLERS))
+def test_replay_buffer_encodes_every_sampled_step_from_its_own_episode(sampler):
+    torch.manual_seed(0)
+    data = raw_transitions()
+    # In place, a sample's lags would come from unrelated rows: the plain transform refuses it.
+    naive = ReplayBuffer(storage=LazyTensorStorage(64), sampler=REPLAY_SAMPLERS[sampler](), batch_size=16,
+                         transform=CausalWindowTransform(CAUSAL))
+    naive.extend(data)
+    with pytest.raises(RuntimeError, match="make_rb_transform_and_sample_unit"):
+        naive.sample()
+
+    transform, unit = CausalWindowTransform(CAUSAL).make_rb_transform_and_sample_unit()
+    buffer = ReplayBuffer(storage=LazyTensorStorage(64), sampler=REPLAY_SAMPLERS[sampler](), sample_unit=unit,
+                          transform=transform, batch_size=16)
+    buffer.extend(data)
+    for _ in range(3):  # 48 stored rows: three batches (a whole epoch without replacement)
+        batch, info = buffer.sample(return_info=True)
+        assert batch.shape == (16,) and rows_right(batch) == 16
+        assert not {"W", "latent", "scm"} & set(batch.keys())
+        torch.testing.assert_close(batch["P"], data["P"][info["index"][K :: K + 1]], rtol=0, atol=0)
+
+
+def test_replay_buffer_replaces_steps_whose_history_the_ring_buffer_overwrote():
+    data = raw_transitions(lengths=(5,), steps=23)  # t = 0..4 repeated; the last 20 rows stay
+    transform, unit = CausalWindowTransform(CAUSAL).make_rb_transform_and_sample_unit()
+    buffer = ReplayBuffer(storage=LazyTensorStorage(20), sampler=SamplerWithoutReplacement(), sample_unit=unit,
+                          transform=transform, batch_size=20)
+    buffer.extend(data)
+    # rows 20-22 wrapped into slots 0-2: slot 2 (t = 2) is the newest, slot 3 (t = 3) the oldest
+    assert buffer.storage[2]["P"][0].item() == 3 and buffer.storage[3]["P"][0].item() == 4
+    batch, info = buffer.sample(return_info=True)
+    assert rows_right(batch) == 20
+    # Slots 3 and 4 (t = 3, 4) need t = 1, 2, which were overwritten; slot 2 before them is no predecessor.
+    sampled = set(info["index"][K :: K + 1].tolist())
+    assert sampled == set(range(20)) - {3, 4}
+
+    stranded = ReplayBuffer(storage=LazyTensorStorage(8), sample_unit=unit, transform=transform, batch_size=4)
+    stranded.extend(data[3:5])  # t = 3, 4: neither has its two previous steps stored
+    with pytest.raises(RuntimeError, match="none of the 4 sampled steps has its 2 previous steps"):
+        stranded.sample()
+
+
+def test_replay_buffer_of_collector_batches_uses_the_trajectory_ids():
+    from torchrl.collectors import Collector
+
+    # 5-step episodes in 6-step batch rows: each row of the second batch continues an episode
+    # (t = 1) right after the previous env's row, whose last record (t = 0) starts an episode.
+    env = TransformedEnv(CountingEnv([5, 5, 5, 5]), InitTracker())
+    collector = Collector(env, counting_policy, frames_per_batch=4 * 6, total_frames=4 * 12)
+    transform, unit = CausalWindowTransform(CAUSAL).make_rb_transform_and_sample_unit()
+    buffer = ReplayBuffer(storage=LazyTensorStorage(48), sampler=SamplerWithoutReplacement(), sample_unit=unit,
+                          transform=transform, batch_size=48)
+    for batch in collector:
+        buffer.extend(batch.reshape(-1))  # env rows side by side: a row's history is 24 records back
+    collector.shutdown()
+    batch, info = buffer.sample(return_info=True)
+    assert rows_right(batch) == 48
+    # second-batch steps 0, 1 of each env row continue an episode whose earlier steps are in the first batch
+    t = (buffer.storage[:]["P"][:, 0] - 1).long()
+    position = torch.arange(48) % 6
+    cut = set(((torch.arange(48) >= 24) & (position < K) & (t > position)).nonzero().squeeze(-1).tolist())
+    assert cut and set(info["index"][K :: K + 1].tolist()) == set(range(48)) - cut
+
+
+def test_replay_buffer_needs_is_init_and_a_flat_storage():
+    transform, unit = CausalWindowTransform(CAUSAL).make_rb_transform_and_sample_unit()
+    buffer = ReplayBuffer(storage=LazyTensorStorage(64), sample_unit=unit, transform=transform, batch_size=8)
+    buffer.extend(raw_transitions().exclude("is_init"))
+    with pytest.raises(KeyError, match="'is_init'.*InitTracker"):
+        buffer.sample()
+    flat_batches = ReplayBuffer(storage=LazyTensorStorage(64, ndim=2), sample_unit=unit, transform=transform, batch_size=8)
+    flat_batches.extend(raw_transitions().reshape(4, 12))
+    with pytest.raises(ValueError, match="1-D storage"):
+        flat_batches.sample()
+    with pytest.raises(ValueError, match="windows of 3 records"):
+        transform(raw_transitions()[:7])

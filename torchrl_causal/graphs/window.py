@@ -9,7 +9,7 @@ that a saved policy reloads with exactly the encoding it was trained on.
 from __future__ import annotations
 
 from collections.abc import Hashable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 Node = Hashable
@@ -56,6 +56,10 @@ class AdjustmentWindow:
         [('P', 0), ('P', 1), ('X', 0)]
         >>> AdjustmentWindow.from_dict(w.to_dict()) == w
         True
+        >>> w.past_only().lags
+        {'P': (1, 2), 'X': (1, 2)}
+        >>> w.non_causal_twin().lags
+        {'P': (0, 1, 2), 'W': (0, 1, 2), 'X': (1, 2)}
     """
 
     k: int
@@ -89,6 +93,40 @@ class AdjustmentWindow:
         if t < 0:
             raise ValueError(f"timestep must be >= 0, got {t}")
         return frozenset((var, t - lag) for var, var_lags in self.lags.items() for lag in var_lags if t - lag >= 0)
+
+    def non_causal_twin(self) -> AdjustmentWindow:
+        """The window-matched non-causal baseline of this window.
+
+        Every observed variable, the excluded ones (e.g. the compass ``W``) included, at
+        the lags this window gives its state variables (their union), and the action at
+        lags ``1..k``; nothing excluded, ``exact=False``, no witnesses. It conditions on
+        the same stretch of history as this window, so comparing the two separates the
+        effect of excluding variables from the effect of using a window.
+
+        Raises:
+            ValueError: if :attr:`observed` is empty (the twin needs to know what the
+                imitator observes).
+        """
+        if not self.observed:
+            raise ValueError("the non-causal twin needs window.observed to know which variables the imitator sees")
+        state_lags = tuple(sorted({lag for var, lags in self.lags.items() if var != self.action for lag in lags}))
+        action_lags = tuple(range(1, self.k + 1))
+        lags = {var: action_lags if var == self.action else state_lags for var in self.observed}
+        return replace(self, lags={var: lags for var, lags in lags.items() if lags}, excluded=frozenset(),
+                       exact=False, witnesses=())
+
+    def past_only(self) -> AdjustmentWindow:
+        """This window without lag 0: only steps before the current one (lags ``1..k``).
+
+        The reading of the paper's Algorithm 1 line 14 that conditions on past steps only.
+        Variables left with no lag are dropped. The smaller sets have not been checked
+        against the sequential pi-backdoor criterion, so the result has ``exact=False``
+        and no witnesses (a window without lag 0 is returned unchanged).
+        """
+        past = {var: tuple(lag for lag in lags if lag > 0) for var, lags in self.lags.items()}
+        if past == dict(self.lags):
+            return self
+        return replace(self, lags={var: lags for var, lags in past.items() if lags}, exact=False, witnesses=())
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-serialisable description; :meth:`from_dict` inverts it exactly."""

@@ -6,6 +6,7 @@ replay buffers, offline demonstrations).
 """
 
 from torchrl_causal.transforms._layout import FeatureSlice
-from torchrl_causal.transforms.causal_window import CausalWindowTransform
+from torchrl_causal.transforms.causal_window import CausalWindowTransform, causal_template
+from torchrl_causal.transforms.replay import EpisodeHistory, EpisodeWindowEncoder
 
-__all__ = ["CausalWindowTransform", "FeatureSlice"]
+__all__ = ["CausalWindowTransform", "EpisodeHistory", "EpisodeWindowEncoder", "FeatureSlice", "causal_template"]

@@ -11,34 +11,21 @@ import torch
 from tensordict import TensorDictBase, unravel_key
 from tensordict.utils import NestedKey
 from torchrl.data import Bounded, Composite, TensorSpec, Unbounded
-from torchrl.envs import EnvBase, Transform
+from torchrl.envs import EnvBase, Transform, TransformedEnv
+from torchrl.envs.batched_envs import BatchedEnvBase
 from torchrl.envs.transforms.utils import _get_reset
 
+from torchrl_causal.graphs.template import TimeSliceTemplate
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.transforms._layout import FeatureSlice, LagRing, WindowLayout, spec_bounds
+from torchrl_causal.transforms.replay import EpisodeHistory, EpisodeWindowEncoder
 
-__all__ = ["CausalWindowTransform"]
+__all__ = ["CausalWindowTransform", "causal_template"]
 
+#: Sub-tensordicts of a confounded env that no imitator may see: the variables latent to
+#: the imitator, and the structural causal model's own (the confounder U).
 LATENT_KEY = "latent"
-
-
-def _applied_window(window: AdjustmentWindow, *, include_current: bool, causal: bool) -> AdjustmentWindow:
-    """The window the transform encodes, after the constructor's two switches.
-
-    The result (not the argument) is what the transform saves in its state, so a reloaded
-    transform never depends on how the switches were set.
-    """
-    if not causal:
-        if not window.observed:
-            raise ValueError("causal=False needs window.observed to know which variables the imitator sees")
-        state_lags = tuple(sorted({lag for var, lags in window.lags.items() if var != window.action for lag in lags}))
-        action_lags = tuple(range(1, window.k + 1))
-        lags = {var: action_lags if var == window.action else state_lags for var in window.observed}
-        window = replace(window, lags={v: l for v, l in lags.items() if l}, excluded=frozenset(), exact=False, witnesses=())
-    if not include_current:
-        past = {var: tuple(lag for lag in lags if lag > 0) for var, lags in window.lags.items()}
-        window = replace(window, lags={var: lags for var, lags in past.items() if lags})
-    return window
+CONFOUNDER_KEY = "scm"
 
 
 class CausalWindowTransform(Transform):
@@ -47,9 +34,18 @@ class CausalWindowTransform(Transform):
     This is the ``Encode(s, t)`` of the paper's Algorithms 2 and 3: at every reset and
     step, the values of every admissible variable of ``window`` at every lag the window
     names are concatenated into ``out_key``; lags that reach before the episode's first
-    step are zero-padded. Everything the imitator must not condition on is removed from
-    what the policy sees: the window's ``excluded`` observed keys (e.g. the compass
-    ``"W"``) and the whole ``"latent"`` sub-tensordict. Admissible raw keys stay.
+    step are zero-padded.
+
+    **What the imitator sees.** Everything it must not condition on is removed, from the
+    env's outputs, its observation spec and encoded trajectories alike: the window's
+    ``excluded`` observed keys (e.g. the compass ``"W"``), the ``"latent"``
+    sub-tensordict (variables latent to the imitator) and the ``"scm"`` sub-tensordict
+    (the confounder ``U`` and any other mechanism internals). What remains is
+    ``out_key``, the admissible state variables' raw keys at the current step (values
+    the encoding already holds at lag 0, kept for diagnostics such as the position
+    trajectory and so that stored transitions can be encoded again), and the keys that
+    are no variable of the window: ``"action"``, ``"reward"``, the done flags, the
+    env's ``"success"`` and whatever other transforms add (e.g. ``"is_init"``).
 
     **Keys.** An admissible state variable ``v`` is the root key ``v``. The window's
     action variable is read from ``action_key``; its lags (always >= 1) come from the
@@ -67,9 +63,13 @@ class CausalWindowTransform(Transform):
     (:meth:`get_extra_state`), so a reloaded transform encodes identically, and loading
     the state of a different window raises.
 
-    **Offline.** :meth:`encode_trajectories` (also the transform's :meth:`forward`, so
-    it can serve as a replay-buffer or dataset transform) encodes stored, time-ordered
-    demonstrations and gives exactly the tensors the transform produces online.
+    **Offline.** :meth:`encode_trajectories` encodes stored, time-ordered episodes (a
+    demonstration dataset, a rollout) and gives exactly the tensors the transform
+    produces online. A replay buffer's sample is not time-ordered: its rows' earlier
+    steps are elsewhere in the storage, so calling the transform on a batch
+    (:meth:`forward`, which is what a replay-buffer transform does) raises.
+    :meth:`make_rb_transform_and_sample_unit` gives the replay-buffer transform and
+    sample unit that encode every sampled step from its own episode's earlier steps.
 
     Args:
         window: the adjustment window to apply.
@@ -114,9 +114,14 @@ class CausalWindowTransform(Transform):
         >>> "W" in encoded.keys()
         False
 
-    In an environment (see :meth:`from_env`)::
+    In an environment (see :meth:`from_env`):
 
-        >>> env = TransformedEnv(base_env, CausalWindowTransform.from_env(base_env, k=10))  # doctest: +SKIP
+        >>> from torchrl.envs import TransformedEnv
+        >>> from torchrl_causal.envs import RouteChoiceEnv
+        >>> base = RouteChoiceEnv(batch_size=[4], seed=0)
+        >>> env = TransformedEnv(base, CausalWindowTransform.from_env(base, k=1))
+        >>> sorted(env.observation_spec.keys())  # W, ("latent", "O") and ("scm", "U") hidden
+        ['Z', 'observation', 'success']
     """
 
     def __init__(
@@ -132,14 +137,21 @@ class CausalWindowTransform(Transform):
     ) -> None:
         if not isinstance(window, AdjustmentWindow):
             raise TypeError(f"window must be an AdjustmentWindow, got {type(window).__name__}")
-        window = _applied_window(window, include_current=include_current, causal=causal)
+        # The transform stores the window it applies (not the switches), so a reloaded
+        # transform never depends on how they were set.
+        if not causal:
+            window = window.non_causal_twin()
+        if not include_current:
+            window = window.past_only()
         if window.observed:
             unobserved = [var for var in window.lags if var not in window.observed]
             if unobserved:
                 raise ValueError(f"window variables {unobserved} are not observed by the imitator {window.observed}")
         out_key = unravel_key(out_key)
-        if out_key in window.lags or out_key == LATENT_KEY or out_key in window.excluded:
-            raise ValueError(f"out_key {out_key!r} would overwrite a variable of the window")
+        inadmissible = set(window.excluded) | {v for v in window.observed if v not in window.lags and v != window.action}
+        hidden_keys = (LATENT_KEY, CONFOUNDER_KEY, *sorted(inadmissible))
+        if out_key in window.lags or out_key in hidden_keys:
+            raise ValueError(f"out_key {out_key!r} would overwrite a variable of the window or a hidden key")
         if chunk_size < 1:
             raise ValueError(f"chunk_size must be positive, got {chunk_size}")
         state_keys = [var for var, lags in window.lags.items() if lags and var != window.action]
@@ -149,7 +161,7 @@ class CausalWindowTransform(Transform):
         self.action_key = unravel_key(action_key)
         self.check_nan = check_nan
         self.chunk_size = chunk_size
-        self.hidden_keys: tuple[NestedKey, ...] = (LATENT_KEY, *sorted(window.excluded))
+        self.hidden_keys: tuple[NestedKey, ...] = hidden_keys
         self._layout: WindowLayout | None = None
         self._dtype: torch.dtype | None = None
         self._ring: LagRing | None = None
@@ -171,7 +183,11 @@ class CausalWindowTransform(Transform):
 
         Args:
             env: an env exposing ``causal_template`` (a
-                :class:`~torchrl_causal.graphs.TimeSliceTemplate`).
+                :class:`~torchrl_causal.graphs.TimeSliceTemplate`), possibly wrapped in
+                :class:`~torchrl.envs.TransformedEnv`, or a TorchRL batched env
+                (:class:`~torchrl.envs.SerialEnv`, :class:`~torchrl.envs.ParallelEnv`)
+                of such envs, started or not: the template is read from the first
+                sub-env, and every other sub-env must have the same one.
             k: window size.
             causal: ``True`` applies :func:`~torchrl_causal.graphs.windowed_adjustment`
                 (``mode`` as given); ``False`` gives a non-causal baseline that keeps
@@ -185,9 +201,7 @@ class CausalWindowTransform(Transform):
         """
         if isinstance(k, bool) or not isinstance(k, int) or k < 0:
             raise ValueError(f"window size k must be a non-negative int, got {k!r}")
-        template = getattr(env, "causal_template", None)
-        if template is None:
-            raise AttributeError(f"{type(env).__name__} exposes no causal_template to build a window from")
+        template = causal_template(env)
         from torchrl_causal.graphs import observation_window, windowed_adjustment
 
         if causal:
@@ -399,8 +413,60 @@ class CausalWindowTransform(Transform):
     # ------------------------------------------------------------------ offline
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
-        """Encodes stored trajectories: see :meth:`encode_trajectories`."""
-        return self.encode_trajectories(tensordict)
+        """Refuses to encode a batch whose time order it cannot know.
+
+        A module call (what a replay buffer or ``Compose`` does with its transforms) gets
+        rows without their episodes: a replay buffer's random rows, or slices whose first
+        steps lack their earlier steps, would have their lags filled from unrelated rows.
+
+        Raises:
+            RuntimeError: always, naming the two correct uses.
+        """
+        raise RuntimeError(
+            f"{type(self).__name__} cannot encode a batch of rows on its own: a step's lags need its "
+            "episode's earlier steps. For stored, time-ordered episodes call encode_trajectories(data); in "
+            "a replay buffer use the transform and sample unit of make_rb_transform_and_sample_unit()"
+        )
+
+    def make_rb_transform_and_sample_unit(
+        self, *, traj_key: NestedKey | None = None
+    ) -> tuple[EpisodeWindowEncoder, EpisodeHistory]:
+        """A replay-buffer transform and sample unit that encode each sampled step correctly.
+
+        Store raw transitions (the admissible keys, ``action_key``, ``"is_init"`` and
+        ``("next", "done")``, as a demonstration dataset or an InitTracker'd collector
+        gives them) in a :class:`~torchrl.data.ReplayBuffer` built with both: every
+        sampled step brings its episode's ``k`` earlier steps along
+        (:class:`~torchrl_causal.transforms.EpisodeHistory`) and is encoded from them
+        (:class:`~torchrl_causal.transforms.EpisodeWindowEncoder`), with exactly the
+        values the online transform gives it. Any anchor sampler works.
+
+        Args:
+            traj_key: the stored trajectory id that tells where each trajectory's
+                earlier steps are when the storage holds pieces of trajectories side by
+                side (a flattened ``[B, T]`` collector batch). Defaults to
+                ``("collector", "traj_ids")`` or ``"episode"`` when stored; see
+                :class:`~torchrl_causal.transforms.EpisodeHistory`.
+
+        Examples:
+            >>> from tensordict import TensorDict
+            >>> from torchrl.data import LazyTensorStorage, ReplayBuffer
+            >>> from torchrl_causal.graphs import AdjustmentWindow
+            >>> window = AdjustmentWindow(k=1, action="X", lags={"P": (0, 1), "X": (1,)})
+            >>> transform, unit = CausalWindowTransform(window).make_rb_transform_and_sample_unit()
+            >>> buffer = ReplayBuffer(storage=LazyTensorStorage(10), sample_unit=unit, transform=transform)
+            >>> P = torch.arange(1.0, 7.0).unsqueeze(-1)  # two 3-step episodes: P = 1, 2, 3 and 4, 5, 6
+            >>> buffer.extend(TensorDict(
+            ...     {"P": P, "action": 10 * P, "is_init": (P - 1) % 3 == 0,
+            ...      "next": {"P": P + 1, "done": P % 3 == 0}}, [6]))
+            tensor([0, 1, 2, 3, 4, 5])
+            >>> batch = buffer.sample(8)
+            >>> bool((batch["observation"] == torch.cat(  # [P_t, P_{t-1}, X_{t-1}] within each episode
+            ...     [batch["P"], torch.where(batch["is_init"], 0, batch["P"] - 1),
+            ...      torch.where(batch["is_init"], 0, 10 * (batch["P"] - 1))], -1)).all())
+            True
+        """
+        return EpisodeWindowEncoder(self), EpisodeHistory(self.window.k, traj_key=traj_key)
 
     def encode_trajectories(self, trajectories: TensorDictBase) -> TensorDictBase:
         """Encodes stored, time-ordered transitions exactly as the online transform would.
@@ -541,6 +607,66 @@ class CausalWindowTransform(Transform):
             f"{type(self).__name__}(k={self.window.k}, lags=[{lags}], hidden={list(self.hidden_keys)}, "
             f"out_key={self.out_key!r})"
         )
+
+
+def causal_template(env: EnvBase) -> TimeSliceTemplate:
+    """The causal template of ``env``, of its base env, or of every sub-env of a batched env.
+
+    A :class:`~torchrl.envs.TransformedEnv` is unwrapped to its base env. A batched env
+    (:class:`~torchrl.envs.BatchedEnvBase`) that is running is asked for its sub-envs'
+    templates; one that is closed or not started yet is not started for this: each
+    distinct ``(create_env_fn, create_env_kwargs)`` pair builds one env, whose template is
+    read before it is closed. All sub-envs must share the first one's template.
+
+    Raises:
+        AttributeError: if an env exposes no ``causal_template``.
+        ValueError: if the sub-envs of a batched env disagree on it.
+
+    Examples:
+        >>> from torchrl.envs import SerialEnv
+        >>> from torchrl_causal.envs import RouteChoiceEnv
+        >>> causal_template(SerialEnv(2, RouteChoiceEnv)) == RouteChoiceEnv().causal_template
+        True
+    """
+    while isinstance(env, TransformedEnv):
+        env = env.base_env
+    if not isinstance(env, BatchedEnvBase):
+        template = getattr(env, "causal_template", None)
+        if template is None:
+            raise AttributeError(f"{type(env).__name__} exposes no causal_template to build a window from")
+        return template
+    if env.is_closed:
+        templates = _unstarted_sub_env_templates(env)
+    else:
+        try:
+            templates = list(env.causal_template)
+        except AttributeError:
+            raise AttributeError(f"the sub-envs of {type(env).__name__} expose no causal_template to build a window from") from None
+    for index, template in enumerate(templates[1:], 1):
+        if template != templates[0]:
+            raise ValueError(
+                f"sub-env {index} of {type(env).__name__} has another causal template than sub-env 0: "
+                f"{template} != {templates[0]}"
+            )
+    return templates[0]
+
+
+def _unstarted_sub_env_templates(env: BatchedEnvBase) -> list[TimeSliceTemplate]:
+    """The template of every sub-env of a batched env that is not running, one env built per
+    distinct constructor."""
+    built: list[tuple[Any, Mapping[str, Any], TimeSliceTemplate]] = []
+    templates = []
+    for make, kwargs in zip(env.create_env_fn, env.create_env_kwargs):
+        template = next((t for f, kw, t in built if f is make and kw == kwargs), None)
+        if template is None:
+            sub_env = make(**kwargs)
+            try:
+                template = causal_template(sub_env)
+            finally:
+                sub_env.close()
+            built.append((make, kwargs, template))
+        templates.append(template)
+    return templates
 
 
 def _encoding_dtype(dtypes) -> torch.dtype:
