@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import doctest
-
 import pytest
 import torch
 from hypothesis import given, settings
@@ -13,8 +11,6 @@ from torch import nn
 from torchrl.data import Bounded, Composite, Unbounded
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-import torchrl_causal.modules.factories
-import torchrl_causal.modules.networks
 from torchrl_causal.modules import (
     ResidualBlock,
     ResidualMLP,
@@ -196,8 +192,3 @@ def test_actor_actions_stay_in_bounds_for_any_shape(obs_dim, act_dim, num_blocks
     td = actor(TensorDict({"observation": 10 * torch.randn(batch, obs_dim)}, [batch]))
     assert td["action"].shape == (batch, act_dim)
     assert (td["action"].abs() <= half_range).all() and torch.isfinite(td["action_log_prob"]).all()
-
-
-@pytest.mark.parametrize("module", [torchrl_causal.modules.networks, torchrl_causal.modules.factories])
-def test_docstring_examples_run(module):
-    assert doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE).failed == 0

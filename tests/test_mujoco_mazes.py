@@ -9,7 +9,6 @@ MuJoCo's determinism. Humanoid steps are kept few: it is the slow one.
 from __future__ import annotations
 
 import ctypes.util
-import doctest
 import math
 
 import numpy as np
@@ -18,9 +17,6 @@ import torch
 from torchrl.envs import SerialEnv
 from torchrl.envs.utils import check_env_specs
 
-import torchrl_causal.envs.antmaze
-import torchrl_causal.envs.humanoidmaze
-import torchrl_causal.envs.mujoco_maze
 from torchrl_causal.envs import AntMazeEnv, GustProcess, HumanoidMazeEnv, MazePlanner
 
 ENVS = (AntMazeEnv, HumanoidMazeEnv)
@@ -233,11 +229,3 @@ def test_render_gives_rgb_frames(env_cls):
     assert frames.std() > 5  # a lit scene, not a blank buffer
     assert np.abs(frames[0].astype(int) - frames[1]).sum() > 0  # the agent moved: the picture did too
     env.close()
-
-
-@pytest.mark.parametrize(
-    "module", [torchrl_causal.envs.mujoco_maze, torchrl_causal.envs.antmaze, torchrl_causal.envs.humanoidmaze]
-)
-def test_docstring_examples_run(module):
-    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS)
-    assert result.failed == 0 and result.attempted > 0

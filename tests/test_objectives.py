@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import doctest
 import math
 
 import pytest
@@ -13,11 +12,6 @@ from torchrl.data import Bounded
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives import GAILLoss, SoftUpdate, ValueEstimators
 
-import torchrl_causal.objectives.bc
-import torchrl_causal.objectives.expert_sac
-import torchrl_causal.objectives.gail
-import torchrl_causal.objectives.iq_learn
-import torchrl_causal.objectives.sqil
 from torchrl_causal.modules import (
     make_deterministic_actor,
     make_gail_discriminator,
@@ -389,18 +383,3 @@ def test_policy_mean_moves_toward_expert_action_on_a_continuous_bandit(cls):
         updater.step()
     end = policy_mean()
     assert abs(end - 0.5) < 0.15 and abs(end - 0.5) < abs(start - 0.5) - 0.2, (start, end)
-
-
-@pytest.mark.parametrize(
-    "module",
-    [
-        torchrl_causal.objectives.bc,
-        torchrl_causal.objectives.expert_sac,
-        torchrl_causal.objectives.gail,
-        torchrl_causal.objectives.iq_learn,
-        torchrl_causal.objectives.sqil,
-    ],
-)
-def test_docstring_examples_run(module):
-    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
-    assert result.failed == 0

@@ -1,8 +1,11 @@
 """TorchRL transforms that apply causal knowledge to what a policy observes.
 
 :class:`CausalWindowTransform` is the one door through which the adjustment window
-computed by :mod:`torchrl_causal.graphs` enters every pipeline (envs, collectors,
-replay buffers, offline demonstrations).
+computed by :mod:`torchrl_causal.graphs` enters every pipeline: envs and collectors
+(online), stored episodes (:meth:`~CausalWindowTransform.encode_trajectories`) and
+replay buffers of raw transitions (:class:`EpisodeHistory` and
+:class:`EpisodeWindowEncoder`, from
+:meth:`~CausalWindowTransform.make_rb_transform_and_sample_unit`).
 """
 
 from torchrl_causal.transforms._layout import FeatureSlice
