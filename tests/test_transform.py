@@ -191,6 +191,22 @@ def test_single_env_exact_tensors_with_zero_padding():
     assert set(env.observation_spec.keys()) == {"observation", "P", "V"}
 
 
+def test_an_imitator_collector_on_rover_maze_stores_no_confounder():
+    from torchrl.collectors import Collector
+
+    from torchrl_causal.envs import RoverMazeEnv
+
+    base = RoverMazeEnv(maze="u", batch_size=[4], seed=0)
+    assert ("scm", "U") in base.observation_spec.keys(True, True)
+    env = TransformedEnv(base, CausalWindowTransform.from_env(base, k=2))
+    collector = Collector(env, policy=None, frames_per_batch=4 * 8, total_frames=4 * 8)
+    batch = next(iter(collector))
+    collector.shutdown()
+    step = {"observation", "P", "L", "success", "done", "terminated", "truncated"}
+    assert set(batch.keys()) == step | {"action", "collector", "next"}
+    assert set(batch["next"].keys()) == step | {"reward"}
+
+
 def test_observed_variables_outside_the_window_are_hidden_too():
     window = AdjustmentWindow(k=1, action="X", lags={"P": (0,), "X": (1,)}, observed=("P", "V", "W", "X"))
     env = TransformedEnv(CountingEnv([3]), CausalWindowTransform(window))

@@ -108,8 +108,13 @@ def _needs_relaxation(env: EnvBase) -> bool:
 
 
 def make_imitator_env(cfg: DictConfig, window: AdjustmentWindow, regime: str, batch_size: int, seed: int) -> TransformedEnv:
-    """The env as the imitator sees it: the window's encoding in ``"observation"``, the
-    collider and the latent variables removed, a continuous action."""
+    """The env as the imitator sees it, a continuous action.
+
+    Its outputs (what the collector stores) are the window's encoding in
+    ``"observation"``, the raw admissible variables at the current step, ``"success"``,
+    the reward and done flags; the excluded collider (W), the ``"latent"`` variables and
+    the confounder under ``"scm"`` are removed (see
+    :class:`~torchrl_causal.transforms.CausalWindowTransform`)."""
     base = make_env(cfg, regime, batch_size, seed)
     env = TransformedEnv(base, CausalWindowTransform(window))
     if _needs_relaxation(base):
