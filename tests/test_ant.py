@@ -73,3 +73,21 @@ def test_locomotion_env_specs_reward_and_termination():
     assert changes.nonzero()[:, 1].unique().tolist() == [6, 13]  # redrawn at steps 7 and 14
     assert rollout["next", "truncated"][:, -1].all()
 
+
+
+def test_shipped_locomotion_weights_walk_in_every_direction():
+    from tensordict import TensorDict
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+    from torchrl_causal.trainers.locomotion import make_locomotion_actor
+
+    actor = make_locomotion_actor(load_locomotion_network())
+    east, north = torch.tensor([1.0, 0.0]), torch.tensor([0.0, 1.0])
+    directions = torch.stack((east, north, -east, -north))
+    env = AntLocomotionEnv(batch_size=4, direction_period=10_000, seed=0)
+    start = env.reset(TensorDict(direction=directions, batch_size=[4]))
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        rollout = env.rollout(150, actor, auto_reset=False, tensordict=start, break_when_any_done=False)
+    travelled = ((rollout["next", "xy"][:, -1] - rollout["xy"][:, 0]) * directions).sum(-1)
+    assert not rollout["next", "terminated"].any()
+    assert (travelled >= 3.0).all(), travelled.tolist()
