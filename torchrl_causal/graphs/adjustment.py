@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Literal
 
-from .criteria import _AncestralView, _find_ox_map, _ManipulatedGraph, sequential_pi_backdoor
+from .criteria import ExactAdjustment, find_adjustment, sequential_pi_backdoor
 from .diagram import CausalDiagram
 from .errors import BoundedInfluenceError, GraphError, NotImitableError
 from .template import REWARD, TimeSliceTemplate
@@ -54,114 +54,6 @@ def _check_k(k: object) -> int:
     return k
 
 
-# ---------------------------------------------------------------------- Algorithm 1 core
-@dataclass(frozen=True)
-class ExactAdjustment:
-    """The sequential pi-backdoor sets of one diagram, as Kumor et al. construct them.
-
-    ``Z_t = (MB ∪ BA) ∩ before(X_t)`` for a boundary action and ``∅`` otherwise
-    (Algorithm 1, lines 4-10). The sets are prefixes of one temporally sorted list, so they
-    are produced on demand instead of being stored (they grow linearly with ``t``).
-
-    Attributes:
-        diagram: the diagram the sets are for.
-        actions: the action nodes in temporal order.
-        ox: FindOX's ``O^X``.
-        markov_boundary: ``MB = Pa+(C(Ch+(O^X))) \\ O^X`` in the projection of ``G^Y_{X'}``.
-        boundary_actions: actions in ``O^X`` with an effective child outside ``O^X``.
-    """
-
-    diagram: CausalDiagram
-    actions: tuple[Node, ...]
-    ox: frozenset[Node]
-    markov_boundary: frozenset[Node]
-    boundary_actions: frozenset[Node]
-
-    def adjustment_set(self, action: Node) -> frozenset[Node]:
-        if action not in self.boundary_actions:
-            if action not in self.actions:
-                raise GraphError(f"{action!r} is not an action of this diagram")
-            return frozenset()
-        before = self.diagram.before(action)
-        return frozenset(v for v in self.markov_boundary | self.boundary_actions if v in before)
-
-    @property
-    def family(self) -> dict[Node, frozenset[Node]]:
-        """Every action's set (materialised; quadratic in the horizon)."""
-        return {x: self.adjustment_set(x) for x in self.actions}
-
-
-def _relaxed_witness(
-    diagram: CausalDiagram, actions: list[int], candidates: list[int], view: _AncestralView
-) -> tuple[Node, ...]:
-    """An open path for one of ``candidates`` under the largest candidate family: every
-    observed ancestor of the reward that precedes the action. Since no family works, some
-    action fails under this one; the latest failing candidate is the cheapest to check
-    (fewest later actions to re-parent)."""
-    g = diagram
-    rank = g._rank
-    observed_ancestors = sorted((v for v in view.component if v != view.reward), key=rank.__getitem__)
-
-    def prefix(x: int) -> set[int]:
-        return {v for v in observed_ancestors if rank[v] < rank[x]}
-
-    graph = _ManipulatedGraph(g)
-    later = iter(sorted(actions, key=rank.__getitem__, reverse=True))
-    nxt = next(later, None)
-    for x in sorted(candidates, key=rank.__getitem__, reverse=True):
-        while nxt is not None and rank[nxt] > rank[x]:
-            graph.make_future(nxt, prefix(nxt))
-            nxt = next(later, None)
-        _, path = graph.check(x, prefix(x), view.reward)
-        if path is not None:
-            return tuple(g._nodes[v] for v in path)
-    return ()
-
-
-def _algorithm1(diagram: CausalDiagram, actions: Iterable[Node], reward: Node) -> ExactAdjustment:
-    """FindOX, the imitability test, Markov boundary and boundary actions (lines 2-10)."""
-    g = diagram
-    ox_map, view = _find_ox_map(g, actions, reward)
-    rank = g._rank
-    action_ids = sorted(g._ids(actions), key=rank.__getitem__)
-    failing = [x for x in action_ids if x in view.nodes and x not in ox_map]
-    if failing:
-        names = [g._nodes[x] for x in failing]
-        shown = ", ".join(map(repr, names[:6])) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
-        witness = _relaxed_witness(g, action_ids, failing, view)
-        raise NotImitableError(
-            f"no sequential pi-backdoor adjustment exists: FindOX leaves out {shown}; "
-            f"even conditioning on every observed ancestor of {g._nodes[view.reward]!r} leaves open "
-            f"{' ~ '.join(map(repr, witness))}",
-            actions=names,
-            witness=witness,
-        )
-    ox = set(ox_map)
-    acting = {x for x in action_ids if x in ox}
-    # Ch(O^X) in the projection of G^Y with the outgoing edges of X' = O^X ∩ X removed.
-    reached = set(ox)
-    for v in ox - acting:
-        reached.update(view.ch_plus(v) or ())
-    components = {view.component[v] for v in reached}
-    boundary: set[int] = set()
-    for comp in components:
-        members = view.members[comp]
-        boundary.update(members)
-        boundary.update(view.projected_parents(comp))
-    # Removing the edges out of X' only removes projected parents in X' ⊆ O^X, which MB
-    # excludes anyway; it matters through Ch(O^X), which skips the children of X'.
-    boundary -= ox
-    boundary_actions = {x for x in acting if not set(view.ch_plus(x) or ()) <= ox}
-    names = g._nodes
-    return ExactAdjustment(
-        diagram=g,
-        actions=tuple(names[x] for x in action_ids),
-        ox=frozenset(names[v] for v in ox),
-        markov_boundary=frozenset(names[v] for v in boundary),
-        boundary_actions=frozenset(names[v] for v in boundary_actions),
-    )
-
-
 def exact_adjustment(template: TimeSliceTemplate, horizon: int) -> ExactAdjustment:
     """The full-horizon sequential pi-backdoor computation on ``template.unroll(horizon)``.
 
@@ -177,8 +69,7 @@ def exact_adjustment(template: TimeSliceTemplate, horizon: int) -> ExactAdjustme
         ...     ('O', 2) in err.witness
         True
     """
-    diagram = template.unroll(horizon)
-    return _algorithm1(diagram, [(template.action, t) for t in range(horizon)], REWARD)
+    return find_adjustment(template.unroll(horizon), [(template.action, t) for t in range(horizon)], REWARD)
 
 
 # ---------------------------------------------------------------------- Assumption 1
@@ -390,7 +281,7 @@ def windowed_adjustment(
         return AdjustmentWindow(**{**window.__dict__, "witnesses": _open_paths(template, window, k + 1)})
     if mode != "exact":
         raise GraphError(f"mode must be 'exact' or 'relaxed', got {mode!r}")
-    proxy = _algorithm1(template.unroll(k + 1), [(template.action, t) for t in range(k + 1)], REWARD)
+    proxy = exact_adjustment(template, k + 1)
     influence = check_bounded_influence(template, k)
     if not influence.holds:
         raise BoundedInfluenceError(f"cannot use a window of k={k}: {influence.message}")
