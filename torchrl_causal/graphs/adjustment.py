@@ -118,17 +118,31 @@ def _slice_of(node: Node, horizon: int) -> int:
     return horizon if node == REWARD else node[1]  # type: ignore[index]
 
 
-def _farthest_extended_parent(projection: CausalDiagram, horizon: int) -> tuple[int, tuple[Node, ...]]:
-    """max over nodes v of slice(v) - slice(earliest node of pa+(v)), with its chain.
+def _farthest_extended_parent(g: CausalDiagram, horizon: int) -> tuple[int, tuple[Node, ...]]:
+    """max over observed nodes v of slice(v) - slice(earliest node of pa+(v)), with its chain.
 
-    One pass in topological order with a union-find: when ``v`` is added, its class is its
-    C-component in ``G(v)``; each class keeps its earliest member-or-parent.
+    ``pa+`` is that of the latent projection onto the observed nodes, computed without
+    building the projection (whose bidirected edges are quadratic in the horizon when a
+    hidden variable persists). One pass over the observed nodes in topological order with
+    a union-find: two observed nodes are in one C-component of the projection of ``G(v)``
+    exactly when a chain of shared latent ancestors (through latent-only paths; a
+    bidirected edge counts as a latent parent of both ends) joins them. A latent node joins
+    the union-find only once an observed descendant of it has been added ("activated"),
+    and the walk up from a new node stops at activated latents, whose ancestors already
+    joined: each node and edge is handled once. Each class keeps its earliest member or
+    projected parent.
     """
-    g = projection
-    names = g._nodes
+    names, latent, pa, sp = g._nodes, g._latent, g._pa, g._sp
+    n = len(names)
     time = [_slice_of(v, horizon) for v in names]
-    root: dict[int, int] = {}
+    confounder: dict[tuple[int, int], int] = {}
+    for a in range(n):
+        for b in sp[a]:
+            if a < b:
+                confounder[a, b] = n + len(confounder)
+    root = list(range(n + len(confounder)))
     earliest: dict[int, tuple[int, int]] = {}  # class root -> (time, node)
+    active: set[int] = set()
 
     def find(v: int) -> int:
         while root[v] != v:
@@ -136,16 +150,34 @@ def _farthest_extended_parent(projection: CausalDiagram, horizon: int) -> tuple[
             v = root[v]
         return v
 
+    def join(u: int, v: int) -> None:
+        a, b = find(u), find(v)
+        if a != b:
+            root[a] = b
+            earliest[b] = min(earliest.get(a, earliest[b]), earliest[b])
+
     best = (-1, -1, -1)  # (lag, node, extended parent)
     for v in g._order:
-        root[v] = v
-        earliest[v] = min([(time[v], v)] + [(time[p], p) for p in g._pa[v]])
-        for s in g._sp[v]:
-            if s in root:
-                a, b = find(s), find(v)
-                if a != b:
-                    root[a] = b
-                    earliest[b] = min(earliest[a], earliest[b])
+        if v in latent:
+            continue
+        earliest[v] = (time[v], v)
+        stack = [v]
+        while stack:
+            u = stack.pop()
+            for p in pa[u]:
+                if p not in latent:
+                    earliest[find(v)] = min(earliest[find(v)], (time[p], p))
+                elif p in active:
+                    join(p, v)
+                else:
+                    active.add(p)
+                    join(p, v)
+                    stack.append(p)
+            for s in sp[u]:
+                c = confounder[min(u, s), max(u, s)]
+                if c not in active:
+                    active.add(c)
+                join(c, v)
         t_far, far = earliest[find(v)]
         if time[v] - t_far > best[0]:
             best = (time[v] - t_far, v, far)
@@ -163,25 +195,57 @@ def _chain_text(g: CausalDiagram, chain: tuple[Node, ...]) -> str:
     return " ".join(parts)
 
 
+def _latent_route(g: CausalDiagram, source: int, target: int) -> list[int] | None:
+    """A directed path ``source -> ... -> target`` whose interior is latent, or None."""
+    prev = {target: -1}
+    queue = [target]
+    for u in queue:
+        for p in g._pa[u]:
+            if p == source:
+                path = [source]
+                while u != -1:
+                    path.append(u)
+                    u = prev[u]
+                return path
+            if p in g._latent and p not in prev:
+                prev[p] = u
+                queue.append(p)
+    return None
+
+
 def _extended_parent_chain(g: CausalDiagram, v: int, far: int) -> tuple[Node, ...]:
-    """Bidirected path from ``v`` through its predecessors to a member that is ``far`` or a
-    child of ``far``, then ``far``."""
+    """A path from ``v`` to ``far`` through nodes before ``v`` that shows ``far ∈ pa+(v)``:
+    collider-free latent stretches (up to a latent top or across a bidirected edge, then
+    down) between observed members of the C-component, then a latent-only directed path
+    from ``far`` into the last member."""
     if far == v:
         return (g._nodes[v],)
-    rank = g._rank
-    prev = {v: -1}
-    queue = [v]
-    for u in queue:
-        if u == far or far in g._pa[u]:
-            path = [far] if u != far else []
-            while u != -1:
-                path.append(u)
-                u = prev[u]
-            return tuple(g._nodes[i] for i in reversed(path))
-        for s in g._sp[u]:
-            if s not in prev and rank[s] < rank[v]:
-                prev[s] = u
-                queue.append(s)
+    rank, latent = g._rank, g._latent
+    up, down, member = 0, 1, 2
+    start = (v, member)
+    prev: dict[tuple[int, int], tuple[int, int] | None] = {start: None}
+    queue = [start]
+    for state in queue:
+        u, phase = state
+        if phase == member:
+            route = [far] if u == far else _latent_route(g, far, u)
+            if route is not None:
+                nodes = []
+                walk: tuple[int, int] | None = state
+                while walk is not None:
+                    nodes.append(walk[0])
+                    walk = prev[walk]
+                return tuple(g._nodes[i] for i in nodes[::-1] + route[::-1][1:])
+        moves: list[tuple[int, int]] = []
+        if phase != down:
+            moves.extend((p, up) for p in g._pa[u] if p in latent)
+            moves.extend((s, down if s in latent else member) for s in g._sp[u])
+        if phase != member:
+            moves.extend((c, down if c in latent else member) for c in g._ch[u])
+        for nxt in moves:
+            if nxt not in prev and rank[nxt[0]] < rank[v]:
+                prev[nxt] = state
+                queue.append(nxt)
     raise AssertionError("the extended parent must be reachable")  # pragma: no cover
 
 
@@ -194,10 +258,10 @@ def _influence_bound(template: TimeSliceTemplate) -> tuple[int | None, tuple[Nod
     lag = max(template.max_lag, 1)
     short = (len(template.variables) + 1) * (len(template.latent) + 1) * lag + 2
     long = 2 * short + 1
-    projection = template.unroll(short).latent_projection()
-    r_short, chain = _farthest_extended_parent(projection, short)
-    r_long, _ = _farthest_extended_parent(template.unroll(long).latent_projection(), long)
-    return (None if r_long > r_short else r_short), chain, _chain_text(projection, chain), short
+    unrolled = template.unroll(short)
+    r_short, chain = _farthest_extended_parent(unrolled, short)
+    r_long, _ = _farthest_extended_parent(template.unroll(long), long)
+    return (None if r_long > r_short else r_short), chain, _chain_text(unrolled, chain), short
 
 
 def check_bounded_influence(template: TimeSliceTemplate, k: int | None = None) -> BoundedInfluence:

@@ -9,7 +9,7 @@ stay linear per query.
 from __future__ import annotations
 
 from bisect import bisect_left
-from collections.abc import Hashable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -97,18 +97,26 @@ def _temporal(diagram: CausalDiagram, actions: Node | Iterable[Node], reward: No
 
 
 class _ManipulatedGraph:
-    """``G'_t`` built incrementally, latest action first.
+    """``G'_t`` of a family, built incrementally, latest action first.
 
     Going backwards in time, each action in turn becomes a "future" action: it loses every
     incoming edge (directed and bidirected: under ``do(pi)`` it responds to its adjustment
     set alone) and gets its set as parents. Each step costs the degree of one action, so
     checking all ``H`` actions costs ``H`` searches and no graph copies.
+
+    Whether ``X_t`` causes the reward in ``G'_t`` is read off a single graph, the one where
+    every action responds to its set: the two differ only in edges into actions up to
+    ``X_t``, which no directed path out of ``X_t`` can use (the sets precede their
+    actions). One ancestor search thus serves every action.
     """
 
-    def __init__(self, diagram: CausalDiagram) -> None:
+    def __init__(self, diagram: CausalDiagram, sets: Mapping[int, set[int]], reward: int) -> None:
+        self.rank = diagram._rank
         self.pa = [list(p) for p in diagram._pa]
         self.ch = [list(c) for c in diagram._ch]
         self.sp = [list(s) for s in diagram._sp]
+        policy_parents = [sets[v] if v in sets else p for v, p in enumerate(diagram._pa)]
+        self.causes_reward = _ancestor_ids(policy_parents, [reward])
 
     def make_future(self, action: int, adjustment: Iterable[int]) -> None:
         pa, ch, sp = self.pa, self.ch, self.sp
@@ -121,12 +129,40 @@ class _ManipulatedGraph:
         for z in pa[action]:
             ch[z].append(action)
 
+    def _ancestor_test(self, x: int, z: set[int]) -> Callable[[int], bool]:
+        """``v ∈ An(z)``, searched lazily: open colliders are few, and ``An(z)`` of a window
+        reaches back to the start of the episode. A directed path into ``z`` only visits
+        nodes before ``x``, where ``G'_t`` is the original graph."""
+        rank, ch, limit = self.rank, self.ch, self.rank[x]
+        known: dict[int, bool] = {}
+
+        def test(v: int) -> bool:
+            if v in z:
+                return True
+            if rank[v] >= limit:
+                return False
+            if v in known:
+                return known[v]
+            seen = {v}
+            stack = [v]
+            while stack:
+                for c in ch[stack.pop()]:
+                    if c in z or known.get(c):
+                        known[v] = True
+                        return True
+                    if c not in seen and rank[c] < limit and c not in known:
+                        seen.add(c)
+                        stack.append(c)
+            known.update(dict.fromkeys(seen, False))
+            return False
+
+        return test
+
     def check(self, x: int, z: set[int], reward: int) -> tuple[str, list[int] | None]:
         """Definition 2 for ``x`` (every later action already made future)."""
-        pa, ch, sp = self.pa, self.ch, self.sp
-        if reward not in _ancestor_ids(ch, [x]):
+        if x not in self.causes_reward:
             return "not_ancestor", None
-        path = _find_open_path(pa, ch, sp, [x], z.__contains__, _ancestor_ids(pa, z).__contains__, reward.__eq__, cut=x)
+        path = _find_open_path(self.pa, self.ch, self.sp, [x], z.__contains__, self._ancestor_test(x, z), reward.__eq__, cut=x)
         return ("separated", None) if path is None else ("open_path", path)
 
 
@@ -151,7 +187,7 @@ def _adjustment_ids(
         hidden = [names[v] for v in z if v in diagram._latent]
         if hidden:
             raise GraphError(f"the adjustment set of {names[x]!r} holds latent nodes {hidden}")
-        late = [names[v] for v in sorted(z, key=rank.__getitem__) if rank[v] >= rank[x]]
+        late = [names[v] for v in sorted((v for v in z if rank[v] >= rank[x]), key=rank.__getitem__)]
         if late and given_order:
             raise GraphError(f"the adjustment set of {names[x]!r} must precede it in the diagram's order, got {late}")
         if late:
@@ -206,7 +242,7 @@ def sequential_pi_backdoor(
     names = g._nodes
     reasons: dict[Node, str] = {}
     witnesses: dict[Node, tuple[Node, ...]] = {}
-    graph = _ManipulatedGraph(g)
+    graph = _ManipulatedGraph(g, sets, y)
     for x in reversed(action_ids):
         reason, path = graph.check(x, sets[x], y)
         reasons[names[x]] = reason
@@ -442,13 +478,16 @@ def find_ox(diagram: CausalDiagram, actions: Node | Iterable[Node], reward: Node
     return frozenset(g._nodes[v] for v in ox)
 
 
-def _unblockable_path(g: CausalDiagram, action_ids: list[int], x: int, y: int) -> list[int] | None:
-    """A path that makes action ``x`` fail Definition 2 whatever the sets, or None.
+def _certificate(g: CausalDiagram, action_ids: list[int], x: int, y: int) -> tuple[list[int], set[int]] | None:
+    """Proof that action ``x`` fails Definition 2 in every family, or None.
 
-    ``x`` must cause ``y`` along a directed path that avoids the later actions (every
-    ``G'_t`` replaces their incoming edges), and the path: into ``x`` through an
-    arrowhead, no collider, every non-collider latent or after ``x`` (so out of reach of
-    ``Z_x``), and no edge into a later action. Both survive in every ``G'_t``.
+    Emptying a later action's set only removes edges into it, which never makes the check
+    of ``x`` harder, so the graph ``G°`` where the later actions keep no incoming edge at
+    all is the most favourable ``G'_x``. When ``x`` causes ``y`` there and the set
+    ``Z* = An({x, y}) ∩ O ∩ before(x)`` leaves a path open, no admissible set separates
+    them (van der Zander et al., 2019: when any set between ``∅`` and ``R`` separates two
+    nodes, ``An`` of the pair intersected with ``R`` does), hence no family passes at
+    ``x``. Returns that open path and ``Z*``.
     """
     rank, latent = g._rank, g._latent
     later = {a for a in action_ids if rank[a] > rank[x]}
@@ -461,13 +500,15 @@ def _unblockable_path(g: CausalDiagram, action_ids: list[int], x: int, y: int) -
                 stack.append(c)
     if y not in reached:
         return None
-
-    def conditionable(v: int) -> bool:
-        return v not in latent and rank[v] < rank[x]
-
-    return _find_open_path(
-        g._pa, g._ch, g._sp, [x], conditionable, lambda v: False, y.__eq__, cut=x, fixed=later.__contains__
+    favourable_parents = [() if v in later else p for v, p in enumerate(g._pa)]
+    conditioned = {
+        v for v in _ancestor_ids(favourable_parents, [x, y]) if v not in latent and rank[v] < rank[x]
+    }
+    path = _find_open_path(
+        g._pa, g._ch, g._sp, [x], conditioned.__contains__, _ancestor_ids(favourable_parents, conditioned).__contains__,
+        y.__eq__, cut=x, fixed=later.__contains__,
     )
+    return None if path is None else (path, conditioned)
 
 
 @dataclass(frozen=True)
@@ -524,20 +565,25 @@ class ExactAdjustment:
 def _not_imitable(g: CausalDiagram, action_ids: list[int], failing: list[int], y: int) -> NotImitableError:
     names = g._nodes
     shown = ", ".join(repr(names[x]) for x in failing[:6]) + (f" and {len(failing) - 6} more" if len(failing) > 6 else "")
-    for x in reversed(failing[-8:]):  # the latest ones have the fewest later actions to route around
-        path = _unblockable_path(g, action_ids, x, y)
-        if path is not None:
+    tried = failing[-8:]  # the latest ones have the fewest later actions to route around
+    for x in reversed(tried):
+        found = _certificate(g, action_ids, x, y)
+        if found is not None:
+            path, conditioned = found
             certificate = tuple(names[v] for v in path)
             return NotImitableError(
                 f"no sequential pi-backdoor adjustment exists: FindOX leaves out {shown}. Certificate for "
-                f"{names[x]!r}: it causes {names[y]!r}, and {' ~ '.join(map(repr, certificate))} stays open "
-                f"whatever the sets (no collider; every other node on it is latent or comes after {names[x]!r})",
+                f"{names[x]!r}: even with every later action's set empty, it causes {names[y]!r} and "
+                f"{' ~ '.join(map(repr, certificate))} stays open given the {len(conditioned)} observed ancestors "
+                f"of {names[x]!r} and {names[y]!r} before it; when those do not separate the two, no set does",
                 actions=[names[v] for v in failing],
                 witness=certificate,
             )
+    alone = "each of them" if len(tried) == len(failing) else f"each of the latest {len(tried)}"
     return NotImitableError(
-        f"no sequential pi-backdoor adjustment exists: FindOX leaves out {shown}. No single path certifies "
-        "it: every choice of sets that admits the later actions opens a path for an earlier one",
+        f"no sequential pi-backdoor adjustment exists: FindOX leaves out {shown}. No single action "
+        f"certifies it: {alone} could meet Definition 2 if the later actions' sets were empty, but no family "
+        "of sets meets it for all actions at once",
         actions=[names[v] for v in failing],
     )
 
@@ -549,7 +595,7 @@ def find_adjustment(diagram: CausalDiagram, actions: Node | Iterable[Node], rewa
     Raises:
         NotImitableError: when some action that causes the reward is left out of ``O^X``
             (then no family meets Definition 2). It names those actions and, where one
-            exists, carries a certificate path: one that no choice of sets can block.
+            exists, carries a certificate path: open for one of them under every family.
 
     Examples:
         >>> g = CausalDiagram([("Z", "X"), ("Z", "Y"), ("X", "Y"), ("O", "X"), ("O", "W")],

@@ -48,7 +48,7 @@ class TimeSliceTemplate:
     state, so it may not have lag-0 children.
 
     Raises:
-        GraphError: on duplicate names, an action that is not a variable or not observed,
+        GraphError: on duplicate names, a variable named ``"Y"`` (the reward), an action that is not a variable or not observed,
             an observed set that is not a subset of the variables, an edge naming an
             unknown variable, a negative or non-int lag, a lag-0 cycle or self-loop, or an
             unknown ``reward_slices``.
@@ -87,8 +87,10 @@ class TimeSliceTemplate:
                 raise GraphError(f"variable names must be non-empty strings, got {v!r}")
             if v in seen:
                 raise GraphError(f"duplicate variable name {v!r}")
+            if v == REWARD:
+                raise GraphError(f"the variable name {REWARD!r} is reserved for the terminal reward node")
             seen.add(v)
-        if self.action not in seen:
+        if not isinstance(self.action, str) or self.action not in seen:
             raise GraphError(f"action {self.action!r} is not among the variables {variables}")
         observed_in = set(self._names(self.observed, "observed"))
         if self.action not in observed_in:
@@ -123,7 +125,7 @@ class TimeSliceTemplate:
         known = set(self.variables) if known is None else known
         result = []
         for v in names:
-            if v not in known:
+            if not isinstance(v, str) or v not in known:
                 raise GraphError(f"{what} names {v!r}, which is not a variable ({sorted(known)})")
             if v not in result:
                 result.append(v)
@@ -138,7 +140,7 @@ class TimeSliceTemplate:
             except (TypeError, ValueError):
                 raise GraphError(f"a {what} edge must be a triple (src, dst, lag), got {edge!r}") from None
             for v in (a, b):
-                if v not in known:
+                if not isinstance(v, str) or v not in known:
                     raise GraphError(f"{what} edge {edge!r} names unknown variable {v!r}")
             triple = (a, b, _check_lag(lag, f"{what} edge {edge!r}"))
             if triple not in result:
