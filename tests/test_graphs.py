@@ -25,6 +25,7 @@ from torchrl_causal.graphs import (
     find_ox,
     observation_window,
     sequential_pi_backdoor,
+    verification_horizons,
     windowed_adjustment,
 )
 
@@ -251,8 +252,13 @@ def test_maze_relaxed_mode_excludes_only_w(name, k):
         assert var_lags == (tuple(range(1, k + 1)) if var == template.action else tuple(range(k + 1)))
     assert not window.exact and window.observed == template.observed
     assert window.witnesses, "the hidden variable must leave open paths"
+    g = template.unroll(verification_horizons(k)[-1])
     for path in window.witnesses:
-        assert path[-1] == "Y" and any(node != "Y" and node[0] == hidden for node in path)
+        x = path[0]
+        assert path[-1] == "Y" and is_open_path(g, path, window.adjustment_set(x[1]))
+        # With k >= 1 the previous action is conditioned on, so only the hidden variable opens
+        # paths; with k = 0 the action's own persistence does too (X_t <- X_{t-1} <- L_{t-1} <-> Y).
+        assert any(node != "Y" and node[0] == hidden for node in path) or k == 0
     assert AdjustmentWindow.from_dict(json.loads(json.dumps(window.to_dict()))) == window
 
 
@@ -310,10 +316,15 @@ def test_theorem_1_counterexample():
     assert not sequential_pi_backdoor(g, actions_of(template, horizon), "Y", shifted).holds
     full = exact_adjustment(template, horizon)  # the full horizon is imitable all the same
     assert sequential_pi_backdoor(g, full.actions, "Y", full.family).holds
-    with pytest.raises(NotImitableError, match="fixed window .* is not admissible"):
-        windowed_adjustment(template, k)
-    window = windowed_adjustment(template, k + 1)
-    for h in (k + 2, 3 * k + 8):
+    # The window of Algorithm 1's variables fails at the same horizon; exact mode searches
+    # the other windows before refusing and finds one that holds at every horizon tried.
+    built = AdjustmentWindow(
+        k=k, action="x", lags={v: (tuple(range(1, k + 1)) if v == "x" else tuple(range(k + 1)))
+                               for v in sorted({v for a in proxy.actions for v, _ in proxy.adjustment_set(a)})})
+    assert not sequential_pi_backdoor(g, actions_of(template, horizon), "Y", window_family(built, "x", horizon)).holds
+    window = windowed_adjustment(template, k)
+    assert window.exact and window.lags != built.lags
+    for h in range(1, 41):
         family = window_family(window, "x", h)
         assert sequential_pi_backdoor(template.unroll(h), actions_of(template, h), "Y", family).holds
 

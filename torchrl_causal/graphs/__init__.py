@@ -11,6 +11,7 @@ from .adjustment import (
     check_bounded_influence,
     exact_adjustment,
     observation_window,
+    verification_horizons,
     windowed_adjustment,
 )
 from .criteria import BackdoorReport, ExactAdjustment, find_adjustment, find_ox, sequential_pi_backdoor
@@ -38,5 +39,6 @@ __all__ = [
     "find_ox",
     "observation_window",
     "sequential_pi_backdoor",
+    "verification_horizons",
     "windowed_adjustment",
 ]

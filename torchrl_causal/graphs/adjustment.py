@@ -25,25 +25,27 @@ Decisions where the paper is ambiguous (each verified by the tests):
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Iterable
-from dataclasses import dataclass
+from collections.abc import Hashable, Iterable, Iterator
+from dataclasses import dataclass, replace
 from functools import lru_cache
+from itertools import combinations
 from typing import Literal
 
-from .criteria import ExactAdjustment, find_adjustment, sequential_pi_backdoor
+from .criteria import BackdoorReport, ExactAdjustment, find_adjustment, sequential_pi_backdoor
 from .diagram import CausalDiagram
-from .errors import BoundedInfluenceError, GraphError, NotImitableError
+from .errors import BoundedInfluenceError, GraphError, NotImitableError, WindowConstructionError
 from .template import REWARD, TimeSliceTemplate
 from .window import AdjustmentWindow
 
 Node = Hashable
 
 __all__ = [
+    "MAX_WINDOWS_SEARCHED",
     "BoundedInfluence",
-    "ExactAdjustment",
     "check_bounded_influence",
     "exact_adjustment",
     "observation_window",
+    "verification_horizons",
     "windowed_adjustment",
 ]
 
@@ -296,16 +298,89 @@ def _window_lags(template: TimeSliceTemplate, variables: Iterable[str], k: int) 
     return lags
 
 
-def _window_family(window: AdjustmentWindow, action: str, horizon: int) -> dict[Node, frozenset[Node]]:
-    return {(action, t): window.adjustment_set(t) for t in range(horizon)}
+def verification_horizons(k: int) -> tuple[int, int, int]:
+    """The horizons a window of size ``k`` is checked against Definition 2 at: the proxy's
+    ``k + 1``, then ``2k + 3`` and ``5k + 7``.
+
+    Failures move forward in time: for ``t >= k`` (unclipped window), the diagram of
+    ``(X_{t+1}, H + 1)`` contains that of ``(X_t, H)`` shifted by one step, with the same
+    sets, so an open path for ``X_t`` at ``H`` reappears, shifted, at ``H + 1``. Checking
+    every action at ``5k + 7`` therefore covers every unclipped action at every shorter
+    horizon; the shorter horizons add the first ``k`` actions, whose sets are clipped.
+    Nothing is claimed past ``5k + 7``.
+    """
+    k = _check_k(k)
+    return k + 1, 2 * k + 3, 5 * k + 7
 
 
-def _open_paths(template: TimeSliceTemplate, window: AdjustmentWindow, horizon: int) -> tuple[tuple[Node, ...], ...]:
-    actions = [(template.action, t) for t in range(horizon)]
-    report = sequential_pi_backdoor(
-        template.unroll(horizon), actions, REWARD, _window_family(window, template.action, horizon)
+def _window(template: TimeSliceTemplate, variables: Iterable[str], k: int, exact: bool) -> AdjustmentWindow:
+    chosen = set(variables)
+    return AdjustmentWindow(
+        k=k,
+        action=template.action,
+        lags=_window_lags(template, chosen, k),
+        excluded=frozenset(template.observed) - chosen,
+        exact=exact,
+        observed=template.observed,
+        lags_beyond_k=tuple(
+            (kind, a, b, lag)
+            for kind, edges in (("directed", template.directed), ("bidirected", template.bidirected))
+            for a, b, lag in edges
+            if lag > k
+        ),
     )
-    return tuple(report.witnesses.values())
+
+
+def _window_failures(
+    template: TimeSliceTemplate, window: AdjustmentWindow, stop_at_first: bool
+) -> list[tuple[int, BackdoorReport]]:
+    """The verification horizons at which the window's family fails Definition 2, with the
+    report there (the first ``k`` actions only, except at the longest horizon)."""
+    action, k = template.action, window.k
+    horizons = verification_horizons(k)
+    failures = []
+    for horizon in horizons:
+        actions = [(action, t) for t in range(horizon)]
+        report = sequential_pi_backdoor(
+            template.unroll(horizon),
+            actions,
+            REWARD,
+            {(action, t): window.adjustment_set(t) for t in range(horizon)},
+            check=None if horizon == horizons[-1] else actions[:k],
+        )
+        if not report.holds:
+            failures.append((horizon, report))
+            if stop_at_first:
+                break
+    return failures
+
+
+def _relaxed_window(template: TimeSliceTemplate, k: int) -> AdjustmentWindow:
+    window = _window(template, template.reward_ancestors() & set(template.observed), k, exact=False)
+    witnesses: dict[tuple[Node, ...], None] = {}
+    for _, report in _window_failures(template, window, stop_at_first=False):
+        witnesses.update(dict.fromkeys(report.witnesses.values()))
+    return replace(window, witnesses=tuple(witnesses))
+
+
+#: At most this many windows are tried when the one Algorithm 1 builds fails.
+MAX_WINDOWS_SEARCHED = 1024
+
+
+def _searched_windows(template: TimeSliceTemplate, k: int, tried: AdjustmentWindow) -> Iterator[AdjustmentWindow]:
+    """Windows over subsets of the observed ancestors of the reward (each variable at
+    every lag), largest first: a variable outside the ancestors never helps separate."""
+    candidates = [v for v in template.observed if v in template.reward_ancestors()]
+    count = 0
+    for size in range(len(candidates), -1, -1):
+        for variables in combinations(candidates, size):
+            window = _window(template, variables, k, exact=True)
+            if window.lags == tried.lags:
+                continue
+            count += 1
+            if count > MAX_WINDOWS_SEARCHED:
+                return
+            yield window
 
 
 def windowed_adjustment(
@@ -315,61 +390,69 @@ def windowed_adjustment(
 
     ``mode="exact"`` runs FindOX on the horizon-``(k+1)`` proxy, builds the Markov
     boundary and boundary actions, and keeps every variable type that appears in a set
-    (states at lags ``0..k``, the action at ``1..k``). It raises ``NotImitableError`` when
-    no admissible family exists (naming the actions, with an open path), and
-    :class:`BoundedInfluenceError` when Assumption 1(i) fails for ``k``, instead of
-    returning a window that Theorem 1 does not cover.
+    (states at lags ``0..k``, the action at ``1..k``). That window is then checked against
+    Definition 2 at the :func:`verification_horizons`; when it fails there, the windows
+    over subsets of the observed ancestors of the reward are tried, largest first, and the
+    first that passes is returned. Each refusal says which step failed:
+
+    * :class:`NotImitableError`: the proxy has no admissible family (with a certificate);
+    * :class:`BoundedInfluenceError`: Assumption 1(i) fails for ``k`` (with the chain);
+    * :class:`WindowConstructionError`: no window tried passes at some verification
+      horizon (with the open path there); the diagram may still be imitable.
 
     ``mode="relaxed"`` keeps the set FindOX starts from: the observed ancestors of the
     reward (a pure collider such as the compass ``W`` reaches nothing and drops out), at
     the same lags, with ``exact=False`` and ``witnesses`` listing the paths that stay open
-    in the proxy, so the remaining bias is explicit.
+    at the verification horizons, so the remaining bias is explicit.
+
+    Both modes list in ``lags_beyond_k`` the template edges the window cannot reach.
 
     Examples:
         >>> from torchrl_causal.envs.templates import ANTMAZE_TEMPLATE
         >>> w = windowed_adjustment(ANTMAZE_TEMPLATE, 2, mode="relaxed")
         >>> sorted(w.excluded), w.lags["X"], w.exact
         (['W'], (1, 2), False)
+        >>> w.witnesses[0]
+        (('X', 0), ('O', 0), ('O', 1), ('L', 1), ('P', 1), 'Y')
     """
     k = _check_k(k)
     if mode == "relaxed":
-        variables = template.reward_ancestors() & set(template.observed)
-        window = AdjustmentWindow(
-            k=k,
-            action=template.action,
-            lags=_window_lags(template, variables, k),
-            excluded=frozenset(template.observed) - variables,
-            exact=False,
-            observed=template.observed,
-        )
-        return AdjustmentWindow(**{**window.__dict__, "witnesses": _open_paths(template, window, k + 1)})
+        return _relaxed_window(template, k)
     if mode != "exact":
         raise GraphError(f"mode must be 'exact' or 'relaxed', got {mode!r}")
-    proxy = exact_adjustment(template, k + 1)
+    try:
+        proxy = exact_adjustment(template, k + 1)
+    except NotImitableError as err:
+        raise NotImitableError(f"k={k}: the horizon-{k + 1} proxy is not imitable: {err}", err.actions, err.witness) from err
     influence = check_bounded_influence(template, k)
     if not influence.holds:
-        raise BoundedInfluenceError(f"cannot use a window of k={k}: {influence.message}")
-    variables = {v for x in proxy.actions for v, _ in proxy.adjustment_set(x)}  # type: ignore[misc]
-    window = AdjustmentWindow(
-        k=k,
-        action=template.action,
-        lags=_window_lags(template, variables, k),
-        excluded=frozenset(template.observed) - variables,
-        exact=True,
-        observed=template.observed,
+        raise BoundedInfluenceError(
+            f"cannot use a window of k={k}: {influence.message}",
+            k=k,
+            required_k=influence.required_k,
+            chain=influence.chain,
+        )
+    built = _window(template, {v for x in proxy.actions for v, _ in proxy.adjustment_set(x)}, k, exact=True)  # type: ignore[misc]
+    failures = _window_failures(template, built, stop_at_first=True)
+    if not failures:
+        return built
+    tried = 1
+    for window in _searched_windows(template, k, built):
+        tried += 1
+        if not _window_failures(template, window, stop_at_first=True):
+            return window
+    horizon, report = failures[0]
+    witness = next(iter(report.witnesses.values()))
+    raise WindowConstructionError(
+        f"the windowed construction fails for k={k}: the horizon-{k + 1} proxy is imitable and Assumption 1 "
+        f"holds, but the window {dict(built.lags)} built from Algorithm 1's sets fails Definition 2 at horizon "
+        f"{horizon} ({' ~ '.join(map(repr, witness))} stays open), and none of the {tried - 1} other windows "
+        f"over subsets of the observed reward ancestors passes at horizons {verification_horizons(k)}. This does "
+        "not show that no adjustment exists: try a larger k, or exact_adjustment(template, H)",
+        actions=report.failing,
+        witness=witness,
+        horizon=horizon,
     )
-    for horizon in (k + 1, 3 * k + 3):
-        open_paths = _open_paths(template, window, horizon)
-        if open_paths:
-            raise NotImitableError(
-                f"Algorithm 1's sets exist for k={k}, but the fixed window {dict(window.lags)} is not "
-                f"admissible at horizon {horizon}: {' ~ '.join(map(repr, open_paths[0]))} stays open "
-                "(the horizon-(k+1) proxy cuts effects of its last action that take longer than one "
-                "step; try a larger k, or exact_adjustment for the full horizon)",
-                actions=[path[0] for path in open_paths],
-                witness=open_paths[0],
-            )
-    return window
 
 
 def observation_window(template: TimeSliceTemplate, k: int | None = None) -> AdjustmentWindow:

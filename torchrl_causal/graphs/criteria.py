@@ -205,6 +205,7 @@ def sequential_pi_backdoor(
     actions: Node | Iterable[Node],
     reward: Node,
     adjustment: Mapping[Node, Iterable[Node]],
+    check: Iterable[Node] | None = None,
 ) -> BackdoorReport:
     """Check the sequential pi-backdoor criterion (Definition 2) for a family of sets.
 
@@ -223,6 +224,8 @@ def sequential_pi_backdoor(
             ``order``, the nodes that precede the action in it; without one, any observed
             node that is no descendant of the action or of a later action (the standard
             backdoor rule, with the actions in time order).
+        check: only check these actions (every set still shapes the manipulated graphs);
+            ``reasons`` and ``holds`` then cover them alone. Default: every action.
 
     Raises:
         GraphError: for an unknown or latent node, the reward among the actions, actions
@@ -239,17 +242,21 @@ def sequential_pi_backdoor(
     """
     g, action_ids, y = _temporal(diagram, actions, reward)
     sets = _adjustment_ids(g, action_ids, adjustment, diagram.has_explicit_order)
+    checked = set(action_ids) if check is None else {g._id(v) for v in check}
+    if not checked <= set(action_ids):
+        raise GraphError(f"check names nodes that are not actions: {sorted(repr(g._nodes[v]) for v in checked - set(action_ids))}")
     names = g._nodes
     reasons: dict[Node, str] = {}
     witnesses: dict[Node, tuple[Node, ...]] = {}
     graph = _ManipulatedGraph(g, sets, y)
     for x in reversed(action_ids):
-        reason, path = graph.check(x, sets[x], y)
-        reasons[names[x]] = reason
-        if path is not None:
-            witnesses[names[x]] = tuple(names[v] for v in path)
+        if x in checked:
+            reason, path = graph.check(x, sets[x], y)
+            reasons[names[x]] = reason
+            if path is not None:
+                witnesses[names[x]] = tuple(names[v] for v in path)
         graph.make_future(x, sets[x])
-    reasons = {names[x]: reasons[names[x]] for x in action_ids}
+    reasons = {names[x]: reasons[names[x]] for x in action_ids if x in checked}
     witnesses = {names[x]: witnesses[names[x]] for x in action_ids if names[x] in witnesses}
     return BackdoorReport(holds=not witnesses, reasons=reasons, witnesses=witnesses)
 
