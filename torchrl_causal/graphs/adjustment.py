@@ -413,7 +413,7 @@ def windowed_adjustment(
         >>> sorted(w.excluded), w.lags["X"], w.exact
         (['W'], (1, 2), False)
         >>> w.witnesses[0]
-        (('X', 0), ('O', 0), ('O', 1), ('L', 1), ('P', 1), 'Y')
+        (('X', 0), ('O', 0), ('L', 0), 'Y')
     """
     k = _check_k(k)
     if mode == "relaxed":
