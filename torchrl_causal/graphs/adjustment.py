@@ -13,11 +13,14 @@ Decisions where the paper is ambiguous (each verified by the tests):
   worse, the horizon-``(k+1)`` proxy cuts the effects of its last action that take more
   than one step: with ``x -> a`` at lag 2, ``a -> a`` at lag 2 and the reward at the end,
   Assumption 1 holds for k = 2, yet the proxy's last action is no ancestor of ``Y``, gets
-  ``Z = ∅``, and both the transferred Algorithm-1 sets and the window fail Definition 2
+  ``Z = ∅``, and both the transferred Algorithm-1 sets and their window fail Definition 2
   at H = 7 (``tests/test_graphs.py::test_theorem_1_counterexample``). Exact mode
-  therefore re-checks the window's own family against Definition 2 on the proxy and on a
-  horizon-``(3k+3)`` diagram and refuses (``NotImitableError``) when it is not admissible.
-  On random templates no window that passes these two checks failed up to H = 6k + 10.
+  therefore checks the window's own family against Definition 2 at the
+  :func:`verification_horizons` (``k+1``, ``2k+3``, ``5k+7``; failures only move forward
+  in time, so the longest one covers every unclipped step of the shorter ones), and when
+  it fails there tries the windows over the other subsets of variables before it refuses
+  with :class:`~torchrl_causal.graphs.WindowConstructionError`. The property tests check
+  every window it returns on random templates at H = 40 as well.
 * The reward at every slice (``reward_slices="all"``) makes ``pa(Y)`` reach back to
   ``t = 0``: with ``Y`` in the last slice, as Assumption 1 states, such templates never
   satisfy it, so exact windows need ``reward_slices="last"``.
@@ -272,7 +275,8 @@ def check_bounded_influence(template: TimeSliceTemplate, k: int | None = None) -
     ``t - k`` or later.
 
     Returns the smallest sufficient ``k`` (``required_k``), or ``None`` when the extended
-    parents are unbounded, with the chain that makes it so.
+    parents are unbounded, with the chain that makes it so. The bound is cached per
+    template; ``check_bounded_influence.cache_clear()`` drops the cache.
 
     Examples:
         >>> pa_plus_example = TimeSliceTemplate(
@@ -287,6 +291,10 @@ def check_bounded_influence(template: TimeSliceTemplate, k: int | None = None) -
         _check_k(k)
     required, chain, chain_text, horizon = _influence_bound(template)
     return BoundedInfluence(k=k, required_k=required, chain=chain, chain_text=chain_text, horizon=horizon)
+
+
+#: Drops the bounds cached per template (to time a first call, say).
+check_bounded_influence.cache_clear = _influence_bound.cache_clear  # type: ignore[attr-defined]
 
 
 # ---------------------------------------------------------------------- windows

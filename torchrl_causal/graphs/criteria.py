@@ -169,7 +169,7 @@ class _ManipulatedGraph:
 def _adjustment_ids(
     diagram: CausalDiagram, action_ids: list[int], adjustment: Mapping[Node, Iterable[Node]], given_order: bool
 ) -> dict[int, set[int]]:
-    names, rank = diagram._nodes, diagram._rank
+    names, rank, index = diagram._nodes, diagram._rank, diagram._index
     unknown = set(adjustment) - {names[x] for x in action_ids}
     if unknown:
         raise GraphError(f"adjustment sets given for nodes that are not actions: {sorted(map(repr, unknown))}")
@@ -183,14 +183,19 @@ def _adjustment_ids(
                 f"the adjustment set of {names[x]!r} must be a collection of nodes, got {given!r}; "
                 f"write a single node as {{{given!r}}}"
             )
-        z = {diagram._id(v) for v in given}
-        hidden = [names[v] for v in z if v in diagram._latent]
-        if hidden:
-            raise GraphError(f"the adjustment set of {names[x]!r} holds latent nodes {hidden}")
-        late = [names[v] for v in sorted((v for v in z if rank[v] >= rank[x]), key=rank.__getitem__)]
-        if late and given_order:
-            raise GraphError(f"the adjustment set of {names[x]!r} must precede it in the diagram's order, got {late}")
-        if late:
+        try:
+            z = set(map(index.__getitem__, given))
+        except (KeyError, TypeError):
+            z = {diagram._id(v) for v in given}  # names the unknown node
+        if not z:
+            sets[x] = z
+            continue
+        if not z.isdisjoint(diagram._latent):
+            raise GraphError(f"the adjustment set of {names[x]!r} holds latent nodes {[names[v] for v in z & diagram._latent]}")
+        if max(map(rank.__getitem__, z)) >= rank[x]:
+            late = [names[v] for v in sorted((v for v in z if rank[v] >= rank[x]), key=rank.__getitem__)]
+            if given_order:
+                raise GraphError(f"the adjustment set of {names[x]!r} must precede it in the diagram's order, got {late}")
             raise GraphError(
                 f"the adjustment set of {names[x]!r} holds {late}, descendants of {names[x]!r} or of a later "
                 "action: conditioning on them would need a cycle in the manipulated graph (give the "

@@ -230,16 +230,21 @@ class TimeSliceTemplate:
         if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
             raise GraphError(f"horizon must be an int >= 1, got {horizon!r}")
         last = {v: self.last_slice(v, horizon) for v in self.variables}
+        # Slices hold slice_order (the action last, absent from slice H), so (v, t) sits at
+        # t * width + slot[v] and Y last.
+        width = len(self.slice_order)
+        slot = {v: i for i, v in enumerate(self.slice_order)}
         order: list[object] = [(v, t) for t in range(horizon + 1) for v in self.slice_order if t <= last[v]]
         order.append(REWARD)
+        y = len(order) - 1
         directed = [
-            ((src, t - lag), (dst, t))
+            ((t - lag) * width + slot[src], t * width + slot[dst])
             for src, dst, lag in self.directed
             for t in range(lag, last[dst] + 1)
             if t - lag <= last[src]
         ]
         bidirected = [
-            ((a, t - lag), (b, t))
+            ((t - lag) * width + slot[a], t * width + slot[b])
             for a, b, lag in self.bidirected
             for t in range(lag, last[b] + 1)
             if t - lag <= last[a]
@@ -248,13 +253,7 @@ class TimeSliceTemplate:
         def slices(v: str) -> range:
             return range(last[v], last[v] + 1) if self.reward_slices == "last" else range(last[v] + 1)
 
-        directed += [((v, t), REWARD) for v in self.reward_parents for t in slices(v)]
-        bidirected += [((v, t), REWARD) for v in self.reward_bidirected for t in slices(v)]
-        latent = set(self.latent)
-        return CausalDiagram(
-            directed,
-            bidirected,
-            [node for node in order if node != REWARD and node[0] in latent],  # type: ignore[index]
-            nodes=order,
-            order=order,
-        )
+        directed += [(t * width + slot[v], y) for v in self.reward_parents for t in slices(v)]
+        bidirected += [(t * width + slot[v], y) for v in self.reward_bidirected for t in slices(v)]
+        latent = [t * width + slot[v] for v in self.latent for t in range(last[v] + 1)]
+        return CausalDiagram.from_indices(order, directed, bidirected, latent)
