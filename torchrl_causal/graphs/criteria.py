@@ -369,7 +369,7 @@ class _ComponentGraph:
     member of ``C`` joins ``O^X``.
     """
 
-    def __init__(self, view: _AncestralView, comp: int, actions: set[int]) -> None:
+    def __init__(self, view: _AncestralView, comp: int, actions: set[int], keys: Mapping[int, object]) -> None:
         g = view.g
         self.g = g
         self.actions = actions
@@ -379,15 +379,22 @@ class _ComponentGraph:
         self.nodes = set(self.members) | parents | between
         self.order = sorted(self.nodes, key=g._rank.__getitem__, reverse=True)
         self.children = {v: [c for c in g._ch[v] if c in self.nodes and c not in self.held] for v in self.nodes}
-        self.open_members: frozenset[int] | None = None
+        self.open_members = {m for m in self.members if m not in keys}
         self.earliest: dict[int, tuple[tuple[int, int], ...]] = {}
+        self.latest: list[tuple[int, int]] = []  # the two latest open members, (rank, node)
+        self.stale = True
 
-    def refresh(self, keys: Mapping[int, object]) -> None:
-        open_members = frozenset(m for m in self.members if m not in keys)
-        if open_members == self.open_members:
+    def leave(self, member: int) -> None:
+        """``member`` joined ``O^X``."""
+        if member in self.open_members:
+            self.open_members.remove(member)
+            self.stale = True
+
+    def refresh(self) -> None:
+        if not self.stale:
             return
-        self.open_members = open_members
-        rank, children = self.g._rank, self.children
+        self.stale = False
+        rank, children, open_members = self.g._rank, self.children, self.open_members
         earliest: dict[int, tuple[tuple[int, int], ...]] = {}
         for v in self.order:
             best = {(rank[v], v)} if v in open_members else set()
@@ -395,20 +402,23 @@ class _ComponentGraph:
                 best.update(earliest[c])
             earliest[v] = tuple(sorted(best)[:2])
         self.earliest = earliest
+        self.latest = sorted(((rank[m], m) for m in open_members), reverse=True)[:2]
 
     def separated(self, source: int, action: int, keys: Mapping[int, object]) -> bool:
         """Whether ``O_i ⊥ O^C | O^C ∩ before(X_i)`` holds in ``G_C`` as ``G'_i`` changes it.
 
         ``G'_i`` is the graph that Definition 2 reads the adjustment of ``X_i`` in: the
         outgoing edges of ``X_i`` are removed, the later actions of ``O^X`` lose their
-        incoming edges (their sets come from the Markov boundary, outside ``C``), and the
-        fixed parents that precede ``X_i`` are conditioned on, since ``Z_i`` holds them.
+        incoming edges (without gaining edges from their sets), and the fixed parents
+        that precede ``X_i`` are conditioned on (the sets of :func:`find_adjustment` take
+        them from the Markov boundary). Each of the three is needed for agreement with
+        the brute-force search of ``tests/test_graphs_bruteforce.py``.
         """
+        self.refresh()
         g, held, actions = self.g, self.held, self.actions
         open_members, rank, earliest = self.open_members, g._rank, self.earliest
-        assert open_members is not None
         before_rank = rank[action]
-        if not any(m != source and rank[m] >= before_rank for m in open_members):
+        if not any(m != source and r >= before_rank for r, m in self.latest):
             return True
 
         def conditioned(v: int) -> bool:
@@ -437,25 +447,29 @@ def _find_ox_map(g: CausalDiagram, action_ids: list[int], y: int) -> tuple[dict[
     candidates = sorted((v for v in view.component if v != y), key=rank.__getitem__, reverse=True)
     graphs: dict[int, _ComponentGraph] = {}
 
-    def has_valid_adjustment(keys: Mapping[int, int], oi: int, xi: int) -> bool:
+    ox: dict[int, int] = {}
+
+    def has_valid_adjustment(oi: int, xi: int) -> bool:
         comp = view.component[oi]
         if comp not in graphs:
-            graphs[comp] = _ComponentGraph(view, comp, actions)
-        gc = graphs[comp]
-        gc.refresh(keys)
-        return gc.separated(oi, xi, keys)
+            graphs[comp] = _ComponentGraph(view, comp, actions, ox)
+        return graphs[comp].separated(oi, xi, ox)
 
-    ox: dict[int, int] = {}
+    def join(oi: int, xi: int) -> None:
+        if oi not in ox and view.component[oi] in graphs:
+            graphs[view.component[oi]].leave(oi)
+        ox[oi] = xi
+
     while True:
         previous = dict(ox)
         for oi in candidates:
             children = view.ch_plus(oi, stop=ox)
             if children:
                 xi = min((ox[c] for c in children), key=rank.__getitem__)
-                if has_valid_adjustment(ox, oi, xi):
-                    ox[oi] = xi
-            elif oi in actions and has_valid_adjustment(ox, oi, oi):
-                ox[oi] = oi
+                if has_valid_adjustment(oi, xi):
+                    join(oi, xi)
+            elif oi in actions and has_valid_adjustment(oi, oi):
+                join(oi, oi)
         if ox == previous:
             return ox, view
 
