@@ -626,6 +626,22 @@ def test_diagram_and_adjustment_errors():
         windowed_adjustment(template, 1, mode="approximate")
     with pytest.raises(GraphError, match="horizon must be an int >= 1"):
         template.unroll(0)
+    with pytest.raises(GraphError, match="must point forward"):
+        CausalDiagram.from_indices(["a", "b"], [(1, 0)])
+    with pytest.raises(GraphError, match="'a' is listed twice"):
+        CausalDiagram.from_indices(["a", "a"], [])
+    with pytest.raises(GraphError, match="two distinct nodes"):
+        CausalDiagram.from_indices(["a", "b"], [], [(1, 1)])
+
+
+def test_from_indices_matches_the_named_constructor():
+    for template in (ANTMAZE_TEMPLATE, PA_PLUS_TEMPLATE, variant(HUMANOIDMAZE_TEMPLATE, "C")):
+        g = template.unroll(4)  # built with from_indices
+        named = CausalDiagram(g.directed_edges, g.bidirected_edges, g.latent, nodes=g.nodes, order=g.nodes)
+        assert g.nodes == named.nodes and g.latent == named.latent
+        for v in g.nodes:
+            assert g.parents(v) == named.parents(v) and g.spouses(v) == named.spouses(v)
+            assert g.children(v) == named.children(v)
 
 
 def test_bad_input_is_named():

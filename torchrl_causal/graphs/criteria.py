@@ -484,9 +484,13 @@ def find_ox(diagram: CausalDiagram, actions: Node | Iterable[Node], reward: Node
     projection of ``G^Y``; HasValidAdjustment tests ``O_i ⊥ O^C | O^C ∩ before(X_i)``,
     ``O^C = C \\ (O^X ∪ {O_i})``, in ``G_C``: ``Pa+(C)`` and the intermediate latent
     variables. Where the appendix's pseudocode is terse, ``G_C`` is read as the graph that
-    Definition 2 checks ``X_i`` in (see :class:`_ComponentGraph`); that reading, unlike the
-    literal one, agrees with a brute-force search over every family on tens of thousands
-    of random small diagrams (``tests/test_graphs_bruteforce.py``).
+    Definition 2 checks ``X_i`` in: it keeps the latent variables on every latent-only path
+    into a member of ``C`` (also into members that are parents of other members), holds
+    the parents outside ``C`` fixed and conditions on those before ``X_i``, removes the
+    outgoing edges of ``X_i`` and the incoming edges of the later actions already in
+    ``O^X``. That reading, unlike the literal one, agrees with a brute-force search over
+    every family on tens of thousands of random small diagrams
+    (``tests/test_graphs_bruteforce.py``).
 
     Args:
         diagram: the causal diagram (latent nodes included).

@@ -135,6 +135,9 @@ class CausalDiagram:
         nodes: extra, possibly isolated, nodes.
         order: an explicit topological order of all nodes, used for "before" and for the
             extended parents; defaults to a topological sort that breaks ties by insertion.
+            Without it, the sequential criteria read "before an action" as "not a
+            descendant of it or of a later action" (see
+            :func:`~torchrl_causal.graphs.sequential_pi_backdoor`).
 
     Raises:
         GraphError: on a self-loop, a directed cycle (named), a latent node that is not in
