@@ -4,44 +4,48 @@ Every env exposes ``causal_template``, ``regime`` (``"train"`` | ``"deploy"``),
 ``confounding_strength`` in ``[0, 1]`` and ``horizon``; observed variables are root keys,
 variables latent to the imitator live under ``("latent", name)`` and the confounder under
 ``("scm", name)``.
+
+The names below load their module on first use, so that ``torchrl_causal.envs.templates``
+(pure data) imports without torch or MuJoCo.
 """
 
-from torchrl_causal.envs.antmaze import AntMazeEnv
-from torchrl_causal.envs.base import (
-    REGIMES,
-    CompassSensor,
-    ConfoundedEnv,
-    GustConfoundedEnv,
-    GustProcess,
-    rotate,
-)
-from torchrl_causal.envs.ant import AntLocomotionEnv
-from torchrl_causal.envs.experts import AntMazeExpert, RouteChoiceExpert, RoverExpert
-from torchrl_causal.envs.humanoidmaze import HumanoidMazeEnv
-from torchrl_causal.envs.planner import MAZE_MAPS, MazeLayout, MazePlanner
-from torchrl_causal.envs.route_choice import RouteChoiceEnv, route_choice_value
-from torchrl_causal.envs.rover_maze import ROVER_TASKS, RoverMazeEnv, RoverParameters, rover_dynamics
+from importlib import import_module
 
-__all__ = [
-    "MAZE_MAPS",
-    "REGIMES",
-    "ROVER_TASKS",
-    "AntLocomotionEnv",
-    "AntMazeEnv",
-    "AntMazeExpert",
-    "CompassSensor",
-    "ConfoundedEnv",
-    "GustConfoundedEnv",
-    "GustProcess",
-    "HumanoidMazeEnv",
-    "MazeLayout",
-    "MazePlanner",
-    "RouteChoiceEnv",
-    "RouteChoiceExpert",
-    "RoverExpert",
-    "RoverMazeEnv",
-    "RoverParameters",
-    "rotate",
-    "route_choice_value",
-    "rover_dynamics",
-]
+_EXPORTS = {
+    "AntLocomotionEnv": "ant",
+    "AntMazeEnv": "antmaze",
+    "AntMazeExpert": "experts",
+    "CompassSensor": "base",
+    "ConfoundedEnv": "base",
+    "GustConfoundedEnv": "base",
+    "GustProcess": "base",
+    "HumanoidMazeEnv": "humanoidmaze",
+    "MAZE_MAPS": "planner",
+    "MazeLayout": "planner",
+    "MazePlanner": "planner",
+    "REGIMES": "base",
+    "ROVER_TASKS": "rover_maze",
+    "RouteChoiceEnv": "route_choice",
+    "RouteChoiceExpert": "experts",
+    "RoverExpert": "experts",
+    "RoverMazeEnv": "rover_maze",
+    "RoverParameters": "rover_maze",
+    "rotate": "base",
+    "route_choice_value": "route_choice",
+    "rover_dynamics": "rover_maze",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> object:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS})

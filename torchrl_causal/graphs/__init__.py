@@ -8,15 +8,15 @@ The public entry points: :class:`TimeSliceTemplate` describes one step of an env
 
 from .adjustment import (
     BoundedInfluence,
-    ExactAdjustment,
     check_bounded_influence,
     exact_adjustment,
     observation_window,
+    verification_horizons,
     windowed_adjustment,
 )
-from .criteria import BackdoorReport, find_ox, sequential_pi_backdoor
+from .criteria import BackdoorReport, ExactAdjustment, find_adjustment, find_ox, sequential_pi_backdoor
 from .diagram import CausalDiagram, Confounder
-from .errors import BoundedInfluenceError, GraphError, NotImitableError
+from .errors import BoundedInfluenceError, GraphError, NotImitableError, WindowConstructionError
 from .template import REWARD, TimeSliceTemplate
 from .window import AdjustmentWindow
 
@@ -32,10 +32,13 @@ __all__ = [
     "GraphError",
     "NotImitableError",
     "TimeSliceTemplate",
+    "WindowConstructionError",
     "check_bounded_influence",
     "exact_adjustment",
+    "find_adjustment",
     "find_ox",
     "observation_window",
     "sequential_pi_backdoor",
+    "verification_horizons",
     "windowed_adjustment",
 ]

@@ -13,11 +13,14 @@ Decisions where the paper is ambiguous (each verified by the tests):
   worse, the horizon-``(k+1)`` proxy cuts the effects of its last action that take more
   than one step: with ``x -> a`` at lag 2, ``a -> a`` at lag 2 and the reward at the end,
   Assumption 1 holds for k = 2, yet the proxy's last action is no ancestor of ``Y``, gets
-  ``Z = ∅``, and both the transferred Algorithm-1 sets and the window fail Definition 2
+  ``Z = ∅``, and both the transferred Algorithm-1 sets and their window fail Definition 2
   at H = 7 (``tests/test_graphs.py::test_theorem_1_counterexample``). Exact mode
-  therefore re-checks the window's own family against Definition 2 on the proxy and on a
-  horizon-``(3k+3)`` diagram and refuses (``NotImitableError``) when it is not admissible.
-  On random templates no window that passes these two checks failed up to H = 6k + 10.
+  therefore checks the window's own family against Definition 2 at the
+  :func:`verification_horizons` (``k+1``, ``2k+3``, ``5k+7``; failures only move forward
+  in time, so the longest one covers every unclipped step of the shorter ones), and when
+  it fails there tries the windows over the other subsets of variables before it refuses
+  with :class:`~torchrl_causal.graphs.WindowConstructionError`. The property tests check
+  every window it returns on random templates at H = 40 as well.
 * The reward at every slice (``reward_slices="all"``) makes ``pa(Y)`` reach back to
   ``t = 0``: with ``Y`` in the last slice, as Assumption 1 states, such templates never
   satisfy it, so exact windows need ``reward_slices="last"``.
@@ -25,25 +28,27 @@ Decisions where the paper is ambiguous (each verified by the tests):
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Iterable
-from dataclasses import dataclass
+from collections.abc import Hashable, Iterable, Iterator
+from dataclasses import dataclass, replace
 from functools import lru_cache
+from itertools import combinations
 from typing import Literal
 
-from .criteria import _AncestralView, _find_ox_map, _ManipulatedGraph, sequential_pi_backdoor
+from .criteria import BackdoorReport, ExactAdjustment, find_adjustment, sequential_pi_backdoor
 from .diagram import CausalDiagram
-from .errors import BoundedInfluenceError, GraphError, NotImitableError
+from .errors import BoundedInfluenceError, GraphError, NotImitableError, WindowConstructionError
 from .template import REWARD, TimeSliceTemplate
 from .window import AdjustmentWindow
 
 Node = Hashable
 
 __all__ = [
+    "MAX_WINDOWS_SEARCHED",
     "BoundedInfluence",
-    "ExactAdjustment",
     "check_bounded_influence",
     "exact_adjustment",
     "observation_window",
+    "verification_horizons",
     "windowed_adjustment",
 ]
 
@@ -52,114 +57,6 @@ def _check_k(k: object) -> int:
     if isinstance(k, bool) or not isinstance(k, int) or k < 0:
         raise GraphError(f"window size k must be an int >= 0, got {k!r}")
     return k
-
-
-# ---------------------------------------------------------------------- Algorithm 1 core
-@dataclass(frozen=True)
-class ExactAdjustment:
-    """The sequential pi-backdoor sets of one diagram, as Kumor et al. construct them.
-
-    ``Z_t = (MB ∪ BA) ∩ before(X_t)`` for a boundary action and ``∅`` otherwise
-    (Algorithm 1, lines 4-10). The sets are prefixes of one temporally sorted list, so they
-    are produced on demand instead of being stored (they grow linearly with ``t``).
-
-    Attributes:
-        diagram: the diagram the sets are for.
-        actions: the action nodes in temporal order.
-        ox: FindOX's ``O^X``.
-        markov_boundary: ``MB = Pa+(C(Ch+(O^X))) \\ O^X`` in the projection of ``G^Y_{X'}``.
-        boundary_actions: actions in ``O^X`` with an effective child outside ``O^X``.
-    """
-
-    diagram: CausalDiagram
-    actions: tuple[Node, ...]
-    ox: frozenset[Node]
-    markov_boundary: frozenset[Node]
-    boundary_actions: frozenset[Node]
-
-    def adjustment_set(self, action: Node) -> frozenset[Node]:
-        if action not in self.boundary_actions:
-            if action not in self.actions:
-                raise GraphError(f"{action!r} is not an action of this diagram")
-            return frozenset()
-        before = self.diagram.before(action)
-        return frozenset(v for v in self.markov_boundary | self.boundary_actions if v in before)
-
-    @property
-    def family(self) -> dict[Node, frozenset[Node]]:
-        """Every action's set (materialised; quadratic in the horizon)."""
-        return {x: self.adjustment_set(x) for x in self.actions}
-
-
-def _relaxed_witness(
-    diagram: CausalDiagram, actions: list[int], candidates: list[int], view: _AncestralView
-) -> tuple[Node, ...]:
-    """An open path for one of ``candidates`` under the largest candidate family: every
-    observed ancestor of the reward that precedes the action. Since no family works, some
-    action fails under this one; the latest failing candidate is the cheapest to check
-    (fewest later actions to re-parent)."""
-    g = diagram
-    rank = g._rank
-    observed_ancestors = sorted((v for v in view.component if v != view.reward), key=rank.__getitem__)
-
-    def prefix(x: int) -> set[int]:
-        return {v for v in observed_ancestors if rank[v] < rank[x]}
-
-    graph = _ManipulatedGraph(g)
-    later = iter(sorted(actions, key=rank.__getitem__, reverse=True))
-    nxt = next(later, None)
-    for x in sorted(candidates, key=rank.__getitem__, reverse=True):
-        while nxt is not None and rank[nxt] > rank[x]:
-            graph.make_future(nxt, prefix(nxt))
-            nxt = next(later, None)
-        _, path = graph.check(x, prefix(x), view.reward)
-        if path is not None:
-            return tuple(g._nodes[v] for v in path)
-    return ()
-
-
-def _algorithm1(diagram: CausalDiagram, actions: Iterable[Node], reward: Node) -> ExactAdjustment:
-    """FindOX, the imitability test, Markov boundary and boundary actions (lines 2-10)."""
-    g = diagram
-    ox_map, view = _find_ox_map(g, actions, reward)
-    rank = g._rank
-    action_ids = sorted(g._ids(actions), key=rank.__getitem__)
-    failing = [x for x in action_ids if x in view.nodes and x not in ox_map]
-    if failing:
-        names = [g._nodes[x] for x in failing]
-        shown = ", ".join(map(repr, names[:6])) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
-        witness = _relaxed_witness(g, action_ids, failing, view)
-        raise NotImitableError(
-            f"no sequential pi-backdoor adjustment exists: FindOX leaves out {shown}; "
-            f"even conditioning on every observed ancestor of {g._nodes[view.reward]!r} leaves open "
-            f"{' ~ '.join(map(repr, witness))}",
-            actions=names,
-            witness=witness,
-        )
-    ox = set(ox_map)
-    acting = {x for x in action_ids if x in ox}
-    # Ch(O^X) in the projection of G^Y with the outgoing edges of X' = O^X ∩ X removed.
-    reached = set(ox)
-    for v in ox - acting:
-        reached.update(view.ch_plus(v) or ())
-    components = {view.component[v] for v in reached}
-    boundary: set[int] = set()
-    for comp in components:
-        members = view.members[comp]
-        boundary.update(members)
-        boundary.update(view.projected_parents(comp))
-    # Removing the edges out of X' only removes projected parents in X' ⊆ O^X, which MB
-    # excludes anyway; it matters through Ch(O^X), which skips the children of X'.
-    boundary -= ox
-    boundary_actions = {x for x in acting if not set(view.ch_plus(x) or ()) <= ox}
-    names = g._nodes
-    return ExactAdjustment(
-        diagram=g,
-        actions=tuple(names[x] for x in action_ids),
-        ox=frozenset(names[v] for v in ox),
-        markov_boundary=frozenset(names[v] for v in boundary),
-        boundary_actions=frozenset(names[v] for v in boundary_actions),
-    )
 
 
 def exact_adjustment(template: TimeSliceTemplate, horizon: int) -> ExactAdjustment:
@@ -177,8 +74,7 @@ def exact_adjustment(template: TimeSliceTemplate, horizon: int) -> ExactAdjustme
         ...     ('O', 2) in err.witness
         True
     """
-    diagram = template.unroll(horizon)
-    return _algorithm1(diagram, [(template.action, t) for t in range(horizon)], REWARD)
+    return find_adjustment(template.unroll(horizon), [(template.action, t) for t in range(horizon)], REWARD)
 
 
 # ---------------------------------------------------------------------- Assumption 1
@@ -227,17 +123,31 @@ def _slice_of(node: Node, horizon: int) -> int:
     return horizon if node == REWARD else node[1]  # type: ignore[index]
 
 
-def _farthest_extended_parent(projection: CausalDiagram, horizon: int) -> tuple[int, tuple[Node, ...]]:
-    """max over nodes v of slice(v) - slice(earliest node of pa+(v)), with its chain.
+def _farthest_extended_parent(g: CausalDiagram, horizon: int) -> tuple[int, tuple[Node, ...]]:
+    """max over observed nodes v of slice(v) - slice(earliest node of pa+(v)), with its chain.
 
-    One pass in topological order with a union-find: when ``v`` is added, its class is its
-    C-component in ``G(v)``; each class keeps its earliest member-or-parent.
+    ``pa+`` is that of the latent projection onto the observed nodes, computed without
+    building the projection (whose bidirected edges are quadratic in the horizon when a
+    hidden variable persists). One pass over the observed nodes in topological order with
+    a union-find: two observed nodes are in one C-component of the projection of ``G(v)``
+    exactly when a chain of shared latent ancestors (through latent-only paths; a
+    bidirected edge counts as a latent parent of both ends) joins them. A latent node joins
+    the union-find only once an observed descendant of it has been added ("activated"),
+    and the walk up from a new node stops at activated latents, whose ancestors already
+    joined: each node and edge is handled once. Each class keeps its earliest member or
+    projected parent.
     """
-    g = projection
-    names = g._nodes
+    names, latent, pa, sp = g._nodes, g._latent, g._pa, g._sp
+    n = len(names)
     time = [_slice_of(v, horizon) for v in names]
-    root: dict[int, int] = {}
+    confounder: dict[tuple[int, int], int] = {}
+    for a in range(n):
+        for b in sp[a]:
+            if a < b:
+                confounder[a, b] = n + len(confounder)
+    root = list(range(n + len(confounder)))
     earliest: dict[int, tuple[int, int]] = {}  # class root -> (time, node)
+    active: set[int] = set()
 
     def find(v: int) -> int:
         while root[v] != v:
@@ -245,16 +155,34 @@ def _farthest_extended_parent(projection: CausalDiagram, horizon: int) -> tuple[
             v = root[v]
         return v
 
+    def join(u: int, v: int) -> None:
+        a, b = find(u), find(v)
+        if a != b:
+            root[a] = b
+            earliest[b] = min(earliest.get(a, earliest[b]), earliest[b])
+
     best = (-1, -1, -1)  # (lag, node, extended parent)
     for v in g._order:
-        root[v] = v
-        earliest[v] = min([(time[v], v)] + [(time[p], p) for p in g._pa[v]])
-        for s in g._sp[v]:
-            if s in root:
-                a, b = find(s), find(v)
-                if a != b:
-                    root[a] = b
-                    earliest[b] = min(earliest[a], earliest[b])
+        if v in latent:
+            continue
+        earliest[v] = (time[v], v)
+        stack = [v]
+        while stack:
+            u = stack.pop()
+            for p in pa[u]:
+                if p not in latent:
+                    earliest[find(v)] = min(earliest[find(v)], (time[p], p))
+                elif p in active:
+                    join(p, v)
+                else:
+                    active.add(p)
+                    join(p, v)
+                    stack.append(p)
+            for s in sp[u]:
+                c = confounder[min(u, s), max(u, s)]
+                if c not in active:
+                    active.add(c)
+                join(c, v)
         t_far, far = earliest[find(v)]
         if time[v] - t_far > best[0]:
             best = (time[v] - t_far, v, far)
@@ -272,25 +200,57 @@ def _chain_text(g: CausalDiagram, chain: tuple[Node, ...]) -> str:
     return " ".join(parts)
 
 
+def _latent_route(g: CausalDiagram, source: int, target: int) -> list[int] | None:
+    """A directed path ``source -> ... -> target`` whose interior is latent, or None."""
+    prev = {target: -1}
+    queue = [target]
+    for u in queue:
+        for p in g._pa[u]:
+            if p == source:
+                path = [source]
+                while u != -1:
+                    path.append(u)
+                    u = prev[u]
+                return path
+            if p in g._latent and p not in prev:
+                prev[p] = u
+                queue.append(p)
+    return None
+
+
 def _extended_parent_chain(g: CausalDiagram, v: int, far: int) -> tuple[Node, ...]:
-    """Bidirected path from ``v`` through its predecessors to a member that is ``far`` or a
-    child of ``far``, then ``far``."""
+    """A path from ``v`` to ``far`` through nodes before ``v`` that shows ``far ∈ pa+(v)``:
+    collider-free latent stretches (up to a latent top or across a bidirected edge, then
+    down) between observed members of the C-component, then a latent-only directed path
+    from ``far`` into the last member."""
     if far == v:
         return (g._nodes[v],)
-    rank = g._rank
-    prev = {v: -1}
-    queue = [v]
-    for u in queue:
-        if u == far or far in g._pa[u]:
-            path = [far] if u != far else []
-            while u != -1:
-                path.append(u)
-                u = prev[u]
-            return tuple(g._nodes[i] for i in reversed(path))
-        for s in g._sp[u]:
-            if s not in prev and rank[s] < rank[v]:
-                prev[s] = u
-                queue.append(s)
+    rank, latent = g._rank, g._latent
+    up, down, member = 0, 1, 2
+    start = (v, member)
+    prev: dict[tuple[int, int], tuple[int, int] | None] = {start: None}
+    queue = [start]
+    for state in queue:
+        u, phase = state
+        if phase == member:
+            route = [far] if u == far else _latent_route(g, far, u)
+            if route is not None:
+                nodes = []
+                walk: tuple[int, int] | None = state
+                while walk is not None:
+                    nodes.append(walk[0])
+                    walk = prev[walk]
+                return tuple(g._nodes[i] for i in nodes[::-1] + route[::-1][1:])
+        moves: list[tuple[int, int]] = []
+        if phase != down:
+            moves.extend((p, up) for p in g._pa[u] if p in latent)
+            moves.extend((s, down if s in latent else member) for s in g._sp[u])
+        if phase != member:
+            moves.extend((c, down if c in latent else member) for c in g._ch[u])
+        for nxt in moves:
+            if nxt not in prev and rank[nxt[0]] < rank[v]:
+                prev[nxt] = state
+                queue.append(nxt)
     raise AssertionError("the extended parent must be reachable")  # pragma: no cover
 
 
@@ -303,10 +263,10 @@ def _influence_bound(template: TimeSliceTemplate) -> tuple[int | None, tuple[Nod
     lag = max(template.max_lag, 1)
     short = (len(template.variables) + 1) * (len(template.latent) + 1) * lag + 2
     long = 2 * short + 1
-    projection = template.unroll(short).latent_projection()
-    r_short, chain = _farthest_extended_parent(projection, short)
-    r_long, _ = _farthest_extended_parent(template.unroll(long).latent_projection(), long)
-    return (None if r_long > r_short else r_short), chain, _chain_text(projection, chain), short
+    unrolled = template.unroll(short)
+    r_short, chain = _farthest_extended_parent(unrolled, short)
+    r_long, _ = _farthest_extended_parent(template.unroll(long), long)
+    return (None if r_long > r_short else r_short), chain, _chain_text(unrolled, chain), short
 
 
 def check_bounded_influence(template: TimeSliceTemplate, k: int | None = None) -> BoundedInfluence:
@@ -315,7 +275,8 @@ def check_bounded_influence(template: TimeSliceTemplate, k: int | None = None) -
     ``t - k`` or later.
 
     Returns the smallest sufficient ``k`` (``required_k``), or ``None`` when the extended
-    parents are unbounded, with the chain that makes it so.
+    parents are unbounded, with the chain that makes it so. The bound is cached per
+    template; ``check_bounded_influence.cache_clear()`` drops the cache.
 
     Examples:
         >>> pa_plus_example = TimeSliceTemplate(
@@ -332,6 +293,10 @@ def check_bounded_influence(template: TimeSliceTemplate, k: int | None = None) -
     return BoundedInfluence(k=k, required_k=required, chain=chain, chain_text=chain_text, horizon=horizon)
 
 
+#: Drops the bounds cached per template (to time a first call, say).
+check_bounded_influence.cache_clear = _influence_bound.cache_clear  # type: ignore[attr-defined]
+
+
 # ---------------------------------------------------------------------- windows
 def _window_lags(template: TimeSliceTemplate, variables: Iterable[str], k: int) -> dict[str, tuple[int, ...]]:
     chosen = set(variables)
@@ -341,16 +306,89 @@ def _window_lags(template: TimeSliceTemplate, variables: Iterable[str], k: int) 
     return lags
 
 
-def _window_family(window: AdjustmentWindow, action: str, horizon: int) -> dict[Node, frozenset[Node]]:
-    return {(action, t): window.adjustment_set(t) for t in range(horizon)}
+def verification_horizons(k: int) -> tuple[int, int, int]:
+    """The horizons a window of size ``k`` is checked against Definition 2 at: the proxy's
+    ``k + 1``, then ``2k + 3`` and ``5k + 7``.
+
+    Failures move forward in time: for ``t >= k`` (unclipped window), the diagram of
+    ``(X_{t+1}, H + 1)`` contains that of ``(X_t, H)`` shifted by one step, with the same
+    sets, so an open path for ``X_t`` at ``H`` reappears, shifted, at ``H + 1``. Checking
+    every action at ``5k + 7`` therefore covers every unclipped action at every shorter
+    horizon; the shorter horizons add the first ``k`` actions, whose sets are clipped.
+    Nothing is claimed past ``5k + 7``.
+    """
+    k = _check_k(k)
+    return k + 1, 2 * k + 3, 5 * k + 7
 
 
-def _open_paths(template: TimeSliceTemplate, window: AdjustmentWindow, horizon: int) -> tuple[tuple[Node, ...], ...]:
-    actions = [(template.action, t) for t in range(horizon)]
-    report = sequential_pi_backdoor(
-        template.unroll(horizon), actions, REWARD, _window_family(window, template.action, horizon)
+def _window(template: TimeSliceTemplate, variables: Iterable[str], k: int, exact: bool) -> AdjustmentWindow:
+    chosen = set(variables)
+    return AdjustmentWindow(
+        k=k,
+        action=template.action,
+        lags=_window_lags(template, chosen, k),
+        excluded=frozenset(template.observed) - chosen,
+        exact=exact,
+        observed=template.observed,
+        lags_beyond_k=tuple(
+            (kind, a, b, lag)
+            for kind, edges in (("directed", template.directed), ("bidirected", template.bidirected))
+            for a, b, lag in edges
+            if lag > k
+        ),
     )
-    return tuple(report.witnesses.values())
+
+
+def _window_failures(
+    template: TimeSliceTemplate, window: AdjustmentWindow, stop_at_first: bool
+) -> list[tuple[int, BackdoorReport]]:
+    """The verification horizons at which the window's family fails Definition 2, with the
+    report there (the first ``k`` actions only, except at the longest horizon)."""
+    action, k = template.action, window.k
+    horizons = verification_horizons(k)
+    failures = []
+    for horizon in horizons:
+        actions = [(action, t) for t in range(horizon)]
+        report = sequential_pi_backdoor(
+            template.unroll(horizon),
+            actions,
+            REWARD,
+            {(action, t): window.adjustment_set(t) for t in range(horizon)},
+            check=None if horizon == horizons[-1] else actions[:k],
+        )
+        if not report.holds:
+            failures.append((horizon, report))
+            if stop_at_first:
+                break
+    return failures
+
+
+def _relaxed_window(template: TimeSliceTemplate, k: int) -> AdjustmentWindow:
+    window = _window(template, template.reward_ancestors() & set(template.observed), k, exact=False)
+    witnesses: dict[tuple[Node, ...], None] = {}
+    for _, report in _window_failures(template, window, stop_at_first=False):
+        witnesses.update(dict.fromkeys(report.witnesses.values()))
+    return replace(window, witnesses=tuple(witnesses))
+
+
+#: At most this many windows are tried when the one Algorithm 1 builds fails.
+MAX_WINDOWS_SEARCHED = 1024
+
+
+def _searched_windows(template: TimeSliceTemplate, k: int, tried: AdjustmentWindow) -> Iterator[AdjustmentWindow]:
+    """Windows over subsets of the observed ancestors of the reward (each variable at
+    every lag), largest first: a variable outside the ancestors never helps separate."""
+    candidates = [v for v in template.observed if v in template.reward_ancestors()]
+    count = 0
+    for size in range(len(candidates), -1, -1):
+        for variables in combinations(candidates, size):
+            window = _window(template, variables, k, exact=True)
+            if window.lags == tried.lags:
+                continue
+            count += 1
+            if count > MAX_WINDOWS_SEARCHED:
+                return
+            yield window
 
 
 def windowed_adjustment(
@@ -360,61 +398,69 @@ def windowed_adjustment(
 
     ``mode="exact"`` runs FindOX on the horizon-``(k+1)`` proxy, builds the Markov
     boundary and boundary actions, and keeps every variable type that appears in a set
-    (states at lags ``0..k``, the action at ``1..k``). It raises ``NotImitableError`` when
-    no admissible family exists (naming the actions, with an open path), and
-    :class:`BoundedInfluenceError` when Assumption 1(i) fails for ``k``, instead of
-    returning a window that Theorem 1 does not cover.
+    (states at lags ``0..k``, the action at ``1..k``). That window is then checked against
+    Definition 2 at the :func:`verification_horizons`; when it fails there, the windows
+    over subsets of the observed ancestors of the reward are tried, largest first, and the
+    first that passes is returned. Each refusal says which step failed:
+
+    * :class:`NotImitableError`: the proxy has no admissible family (with a certificate);
+    * :class:`BoundedInfluenceError`: Assumption 1(i) fails for ``k`` (with the chain);
+    * :class:`WindowConstructionError`: no window tried passes at some verification
+      horizon (with the open path there); the diagram may still be imitable.
 
     ``mode="relaxed"`` keeps the set FindOX starts from: the observed ancestors of the
     reward (a pure collider such as the compass ``W`` reaches nothing and drops out), at
     the same lags, with ``exact=False`` and ``witnesses`` listing the paths that stay open
-    in the proxy, so the remaining bias is explicit.
+    at the verification horizons, so the remaining bias is explicit.
+
+    Both modes list in ``lags_beyond_k`` the template edges the window cannot reach.
 
     Examples:
         >>> from torchrl_causal.envs.templates import ANTMAZE_TEMPLATE
         >>> w = windowed_adjustment(ANTMAZE_TEMPLATE, 2, mode="relaxed")
         >>> sorted(w.excluded), w.lags["X"], w.exact
         (['W'], (1, 2), False)
+        >>> w.witnesses[0]
+        (('X', 0), ('O', 0), ('L', 0), 'Y')
     """
     k = _check_k(k)
     if mode == "relaxed":
-        variables = template.reward_ancestors() & set(template.observed)
-        window = AdjustmentWindow(
-            k=k,
-            action=template.action,
-            lags=_window_lags(template, variables, k),
-            excluded=frozenset(template.observed) - variables,
-            exact=False,
-            observed=template.observed,
-        )
-        return AdjustmentWindow(**{**window.__dict__, "witnesses": _open_paths(template, window, k + 1)})
+        return _relaxed_window(template, k)
     if mode != "exact":
         raise GraphError(f"mode must be 'exact' or 'relaxed', got {mode!r}")
-    proxy = _algorithm1(template.unroll(k + 1), [(template.action, t) for t in range(k + 1)], REWARD)
+    try:
+        proxy = exact_adjustment(template, k + 1)
+    except NotImitableError as err:
+        raise NotImitableError(f"k={k}: the horizon-{k + 1} proxy is not imitable: {err}", err.actions, err.witness) from err
     influence = check_bounded_influence(template, k)
     if not influence.holds:
-        raise BoundedInfluenceError(f"cannot use a window of k={k}: {influence.message}")
-    variables = {v for x in proxy.actions for v, _ in proxy.adjustment_set(x)}  # type: ignore[misc]
-    window = AdjustmentWindow(
-        k=k,
-        action=template.action,
-        lags=_window_lags(template, variables, k),
-        excluded=frozenset(template.observed) - variables,
-        exact=True,
-        observed=template.observed,
+        raise BoundedInfluenceError(
+            f"cannot use a window of k={k}: {influence.message}",
+            k=k,
+            required_k=influence.required_k,
+            chain=influence.chain,
+        )
+    built = _window(template, {v for x in proxy.actions for v, _ in proxy.adjustment_set(x)}, k, exact=True)  # type: ignore[misc]
+    failures = _window_failures(template, built, stop_at_first=True)
+    if not failures:
+        return built
+    tried = 1
+    for window in _searched_windows(template, k, built):
+        tried += 1
+        if not _window_failures(template, window, stop_at_first=True):
+            return window
+    horizon, report = failures[0]
+    witness = next(iter(report.witnesses.values()))
+    raise WindowConstructionError(
+        f"the windowed construction fails for k={k}: the horizon-{k + 1} proxy is imitable and Assumption 1 "
+        f"holds, but the window {dict(built.lags)} built from Algorithm 1's sets fails Definition 2 at horizon "
+        f"{horizon} ({' ~ '.join(map(repr, witness))} stays open), and none of the {tried - 1} other windows "
+        f"over subsets of the observed reward ancestors passes at horizons {verification_horizons(k)}. This does "
+        "not show that no adjustment exists: try a larger k, or exact_adjustment(template, H)",
+        actions=report.failing,
+        witness=witness,
+        horizon=horizon,
     )
-    for horizon in (k + 1, 3 * k + 3):
-        open_paths = _open_paths(template, window, horizon)
-        if open_paths:
-            raise NotImitableError(
-                f"Algorithm 1's sets exist for k={k}, but the fixed window {dict(window.lags)} is not "
-                f"admissible at horizon {horizon}: {' ~ '.join(map(repr, open_paths[0]))} stays open "
-                "(the horizon-(k+1) proxy cuts effects of its last action that take longer than one "
-                "step; try a larger k, or exact_adjustment for the full horizon)",
-                actions=[path[0] for path in open_paths],
-                witness=open_paths[0],
-            )
-    return window
 
 
 def observation_window(template: TimeSliceTemplate, k: int | None = None) -> AdjustmentWindow:

@@ -8,15 +8,17 @@ stay linear per query.
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Iterable, Mapping
+from bisect import bisect_left
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 from .diagram import CausalDiagram, _ancestor_ids, _find_open_path
-from .errors import GraphError
+from .errors import GraphError, NotImitableError
 
 Node = Hashable
 
-__all__ = ["BackdoorReport", "sequential_pi_backdoor", "find_ox"]
+__all__ = ["BackdoorReport", "ExactAdjustment", "find_adjustment", "find_ox", "sequential_pi_backdoor"]
 
 
 @dataclass(frozen=True)
@@ -42,27 +44,79 @@ class BackdoorReport:
         return tuple(self.witnesses)
 
 
-def _action_ids(diagram: CausalDiagram, actions: Iterable[Node]) -> list[int]:
-    ids = diagram._ids(actions)
-    hidden = [diagram._nodes[i] for i in ids if i in diagram._latent]
+def _temporal(diagram: CausalDiagram, actions: Node | Iterable[Node], reward: Node) -> tuple[CausalDiagram, list[int], int]:
+    """The diagram with the temporal order that Definition 2 is read in, the actions in that
+    order, and the reward.
+
+    A diagram built with an ``order`` keeps it. Without one, the actions take the order in
+    which they are listed (a set of actions takes the default topological order) and every
+    other node goes as early as its ancestry allows: before ``X_t`` lies everything that is
+    not a descendant of ``X_t`` or of a later action. An adjustment set may then hold any
+    observed non-descendant of its action (the backdoor rule), except descendants of later
+    actions, which would close a cycle through the time order of the actions.
+    """
+    y = diagram._id(reward)
+    single = actions in diagram
+    listed = [diagram._id(actions)] if single else [diagram._id(v) for v in actions]  # type: ignore[union-attr]
+    names = diagram._nodes
+    if len(set(listed)) != len(listed):
+        twice = next(names[v] for v in listed if listed.count(v) > 1)
+        raise GraphError(f"action {twice!r} is listed twice")
+    if y in listed:
+        raise GraphError(f"the reward {reward!r} cannot also be an action")
+    hidden = [names[i] for i in listed if i in diagram._latent]
     if hidden:
         raise GraphError(f"actions must be observed nodes, got latent {hidden}")
-    return sorted(ids, key=diagram._rank.__getitem__)
+    if diagram.has_explicit_order:
+        return diagram, sorted(listed, key=diagram._rank.__getitem__), y
+    if not isinstance(actions, Sequence) or isinstance(actions, str):
+        listed.sort(key=diagram._rank.__getitem__)
+    # level[v] = the latest action t with v a descendant of X_t (0 when none): the nested
+    # sets D_t = De(X_t) ∪ D_{t+1} are reached latest action first, each node once.
+    level = [0] * len(names)
+    for t in range(len(listed), 0, -1):
+        x = listed[t - 1]
+        if level[x]:
+            later = next(names[a] for a in listed[t:] if x in _ancestor_ids(diagram._ch, [a]))
+            raise GraphError(
+                f"actions must be listed in temporal order, but {later!r} (listed after {names[x]!r}) is "
+                f"an ancestor of it; reorder them, or build the CausalDiagram with order=[...]"
+            )
+        level[x] = t
+        stack = [x]
+        while stack:
+            for c in diagram._ch[stack.pop()]:
+                if not level[c]:
+                    level[c] = t
+                    stack.append(c)
+    first = {x: t for t, x in enumerate(listed, 1)}
+    rank = diagram._rank
+    order = sorted(range(len(names)), key=lambda v: (level[v], first.get(v) != level[v], rank[v]))
+    ordered = diagram.with_order([names[v] for v in order])
+    return ordered, listed, y
 
 
 class _ManipulatedGraph:
-    """``G'_t`` built incrementally, latest action first.
+    """``G'_t`` of a family, built incrementally, latest action first.
 
     Going backwards in time, each action in turn becomes a "future" action: it loses every
     incoming edge (directed and bidirected: under ``do(pi)`` it responds to its adjustment
     set alone) and gets its set as parents. Each step costs the degree of one action, so
     checking all ``H`` actions costs ``H`` searches and no graph copies.
+
+    Whether ``X_t`` causes the reward in ``G'_t`` is read off a single graph, the one where
+    every action responds to its set: the two differ only in edges into actions up to
+    ``X_t``, which no directed path out of ``X_t`` can use (the sets precede their
+    actions). One ancestor search thus serves every action.
     """
 
-    def __init__(self, diagram: CausalDiagram) -> None:
+    def __init__(self, diagram: CausalDiagram, sets: Mapping[int, set[int]], reward: int) -> None:
+        self.rank = diagram._rank
         self.pa = [list(p) for p in diagram._pa]
         self.ch = [list(c) for c in diagram._ch]
         self.sp = [list(s) for s in diagram._sp]
+        policy_parents = [sets[v] if v in sets else p for v, p in enumerate(diagram._pa)]
+        self.causes_reward = _ancestor_ids(policy_parents, [reward])
 
     def make_future(self, action: int, adjustment: Iterable[int]) -> None:
         pa, ch, sp = self.pa, self.ch, self.sp
@@ -75,29 +129,47 @@ class _ManipulatedGraph:
         for z in pa[action]:
             ch[z].append(action)
 
+    def _ancestor_test(self, x: int, z: set[int]) -> Callable[[int], bool]:
+        """``v ∈ An(z)``, searched lazily: open colliders are few, and ``An(z)`` of a window
+        reaches back to the start of the episode. A directed path into ``z`` only visits
+        nodes before ``x``, where ``G'_t`` is the original graph."""
+        rank, ch, limit = self.rank, self.ch, self.rank[x]
+        known: dict[int, bool] = {}
+
+        def test(v: int) -> bool:
+            if v in z:
+                return True
+            if rank[v] >= limit:
+                return False
+            if v in known:
+                return known[v]
+            seen = {v}
+            stack = [v]
+            while stack:
+                for c in ch[stack.pop()]:
+                    if c in z or known.get(c):
+                        known[v] = True
+                        return True
+                    if c not in seen and rank[c] < limit and c not in known:
+                        seen.add(c)
+                        stack.append(c)
+            known.update(dict.fromkeys(seen, False))
+            return False
+
+        return test
+
     def check(self, x: int, z: set[int], reward: int) -> tuple[str, list[int] | None]:
         """Definition 2 for ``x`` (every later action already made future)."""
-        pa, ch, sp = self.pa, self.ch, self.sp
-        if reward not in _ancestor_ids(ch, [x]):
+        if x not in self.causes_reward:
             return "not_ancestor", None
-        children, ch[x] = ch[x], []
-        for c in children:
-            pa[c].remove(x)
-        try:
-            path = _find_open_path(
-                pa, ch, sp, [x], z.__contains__, _ancestor_ids(pa, z).__contains__, reward.__eq__
-            )
-        finally:
-            ch[x] = children
-            for c in children:
-                pa[c].append(x)
+        path = _find_open_path(self.pa, self.ch, self.sp, [x], z.__contains__, self._ancestor_test(x, z), reward.__eq__, cut=x)
         return ("separated", None) if path is None else ("open_path", path)
 
 
 def _adjustment_ids(
-    diagram: CausalDiagram, action_ids: list[int], adjustment: Mapping[Node, Iterable[Node]]
+    diagram: CausalDiagram, action_ids: list[int], adjustment: Mapping[Node, Iterable[Node]], given_order: bool
 ) -> dict[int, set[int]]:
-    names = diagram._nodes
+    names, rank, index = diagram._nodes, diagram._rank, diagram._index
     unknown = set(adjustment) - {names[x] for x in action_ids}
     if unknown:
         raise GraphError(f"adjustment sets given for nodes that are not actions: {sorted(map(repr, unknown))}")
@@ -105,11 +177,29 @@ def _adjustment_ids(
     for x in action_ids:
         if names[x] not in adjustment:
             raise GraphError(f"no adjustment set given for action {names[x]!r}")
-        z = {diagram._id(v) for v in adjustment[names[x]]}
-        bad = [names[v] for v in z if v in diagram._latent or diagram._rank[v] >= diagram._rank[x]]
-        if bad:
+        given = adjustment[names[x]]
+        if isinstance(given, str) or not isinstance(given, Iterable):
             raise GraphError(
-                f"adjustment set of {names[x]!r} must hold observed nodes that precede it, got {bad}"
+                f"the adjustment set of {names[x]!r} must be a collection of nodes, got {given!r}; "
+                f"write a single node as {{{given!r}}}"
+            )
+        try:
+            z = set(map(index.__getitem__, given))
+        except (KeyError, TypeError):
+            z = {diagram._id(v) for v in given}  # names the unknown node
+        if not z:
+            sets[x] = z
+            continue
+        if not z.isdisjoint(diagram._latent):
+            raise GraphError(f"the adjustment set of {names[x]!r} holds latent nodes {[names[v] for v in z & diagram._latent]}")
+        if max(map(rank.__getitem__, z)) >= rank[x]:
+            late = [names[v] for v in sorted((v for v in z if rank[v] >= rank[x]), key=rank.__getitem__)]
+            if given_order:
+                raise GraphError(f"the adjustment set of {names[x]!r} must precede it in the diagram's order, got {late}")
+            raise GraphError(
+                f"the adjustment set of {names[x]!r} holds {late}, descendants of {names[x]!r} or of a later "
+                "action: conditioning on them would need a cycle in the manipulated graph (give the "
+                "CausalDiagram an explicit order=[...] if the actions or nodes come in another temporal order)"
             )
         sets[x] = z
     return sets
@@ -117,9 +207,10 @@ def _adjustment_ids(
 
 def sequential_pi_backdoor(
     diagram: CausalDiagram,
-    actions: Iterable[Node],
+    actions: Node | Iterable[Node],
     reward: Node,
     adjustment: Mapping[Node, Iterable[Node]],
+    check: Iterable[Node] | None = None,
 ) -> BackdoorReport:
     """Check the sequential pi-backdoor criterion (Definition 2) for a family of sets.
 
@@ -130,14 +221,21 @@ def sequential_pi_backdoor(
 
     Args:
         diagram: the causal diagram (latent nodes included).
-        actions: the action nodes.
-        reward: the outcome node.
-        adjustment: action -> its set ``Z_t``: observed nodes that precede the action in the
-            diagram's topological order (give the diagram an ``order`` to fix ties).
+        actions: the action nodes in temporal order. A diagram built with an ``order``
+            sorts them by it; otherwise they keep the order given (a set of actions takes
+            the default topological order).
+        reward: the outcome node (not one of the actions).
+        adjustment: action -> its set ``Z_t``, a collection of observed nodes. With an
+            ``order``, the nodes that precede the action in it; without one, any observed
+            node that is no descendant of the action or of a later action (the standard
+            backdoor rule, with the actions in time order).
+        check: only check these actions (every set still shapes the manipulated graphs);
+            ``reasons`` and ``holds`` then cover them alone. Default: every action.
 
     Raises:
-        GraphError: for an unknown or latent node, a missing set, or a set holding a
-            latent node or one that does not precede its action.
+        GraphError: for an unknown or latent node, the reward among the actions, actions
+            listed against their ancestry, a missing set, a set given as a string, or a set
+            holding a latent node or one that cannot precede its action.
 
     Examples:
         >>> g = CausalDiagram([("Z", "X"), ("Z", "Y"), ("X", "Y"), ("O", "X"), ("O", "W")],
@@ -147,20 +245,23 @@ def sequential_pi_backdoor(
         >>> sequential_pi_backdoor(g, ["X"], "Y", {"X": {"Z", "W"}}).witnesses
         {'X': ('X', 'O', 'W', 'Y')}
     """
-    action_ids = _action_ids(diagram, actions)
-    y = diagram._id(reward)
-    sets = _adjustment_ids(diagram, action_ids, adjustment)
-    names = diagram._nodes
+    g, action_ids, y = _temporal(diagram, actions, reward)
+    sets = _adjustment_ids(g, action_ids, adjustment, diagram.has_explicit_order)
+    checked = set(action_ids) if check is None else {g._id(v) for v in check}
+    if not checked <= set(action_ids):
+        raise GraphError(f"check names nodes that are not actions: {sorted(repr(g._nodes[v]) for v in checked - set(action_ids))}")
+    names = g._nodes
     reasons: dict[Node, str] = {}
     witnesses: dict[Node, tuple[Node, ...]] = {}
-    graph = _ManipulatedGraph(diagram)
+    graph = _ManipulatedGraph(g, sets, y)
     for x in reversed(action_ids):
-        reason, path = graph.check(x, sets[x], y)
-        reasons[names[x]] = reason
-        if path is not None:
-            witnesses[names[x]] = tuple(names[v] for v in path)
+        if x in checked:
+            reason, path = graph.check(x, sets[x], y)
+            reasons[names[x]] = reason
+            if path is not None:
+                witnesses[names[x]] = tuple(names[v] for v in path)
         graph.make_future(x, sets[x])
-    reasons = {names[x]: reasons[names[x]] for x in action_ids}
+    reasons = {names[x]: reasons[names[x]] for x in action_ids if x in checked}
     witnesses = {names[x]: witnesses[names[x]] for x in action_ids if names[x] in witnesses}
     return BackdoorReport(holds=not witnesses, reasons=reasons, witnesses=witnesses)
 
@@ -203,7 +304,7 @@ class _AncestralView:
                 self.component[v] = r
                 self.members.setdefault(r, []).append(v)
         self._ch_plus: dict[int, list[int]] = {}
-        self._pa_plus: dict[int, set[int]] = {}
+        self._ancestry: dict[int, tuple[set[int], set[int]]] = {}
 
     def ch_plus(self, v: int, stop: Mapping[int, object] | None = None) -> list[int] | None:
         """Children in the projection; with ``stop``, None as soon as one is not a key of it."""
@@ -230,29 +331,36 @@ class _AncestralView:
         self._ch_plus[v] = found
         return found
 
-    def projected_parents(self, comp: int) -> set[int]:
-        """Observed parents, in the projection, of the members of one C-component."""
-        if comp not in self._pa_plus:
+    def latent_ancestry(self, comp: int) -> tuple[set[int], set[int]]:
+        """The observed parents, in the projection, of the members of one C-component, and
+        the latent nodes on the latent-only directed paths into them."""
+        if comp not in self._ancestry:
             pa, latent = self.g._pa, self.latent
-            result: set[int] = set()
-            seen: set[int] = set()
+            parents: set[int] = set()
+            between: set[int] = set()
             stack = list(self.members[comp])
             while stack:
                 for p in pa[stack.pop()]:
                     if p in latent:
-                        if p not in seen:
-                            seen.add(p)
+                        if p not in between:
+                            between.add(p)
                             stack.append(p)
                     else:
-                        result.add(p)
-            self._pa_plus[comp] = result
-        return self._pa_plus[comp]
+                        parents.add(p)
+            self._ancestry[comp] = parents, between
+        return self._ancestry[comp]
+
+    def projected_parents(self, comp: int) -> set[int]:
+        """Observed parents, in the projection, of the members of one C-component."""
+        return self.latent_ancestry(comp)[0]
 
 
 class _ComponentGraph:
-    """``G_C`` of HasValidAdjustment for one C-component ``C``: the subgraph of ``G^Y`` on the
-    ancestors of ``C`` once the projected parents ``pa(C)`` lose their incoming edges, i.e.
-    ``Pa+(C)`` and the latent variables in between.
+    """``G_C`` of HasValidAdjustment for one C-component ``C`` of the projection of ``G^Y``:
+    the members of ``C``, their projected parents ``pa(C)`` and the intermediate latent
+    variables (those on latent-only directed paths into a member, including paths into
+    members that are themselves parents of other members). The parents outside ``C`` are
+    held fixed, as in the c-factor ``Q[C]``: no incoming edges.
 
     The conditioning sets ``O^C ∩ before(X_i)`` are prefixes in temporal order, so instead
     of an ancestor search per query it keeps, for each node, the two earliest descendants
@@ -261,31 +369,32 @@ class _ComponentGraph:
     member of ``C`` joins ``O^X``.
     """
 
-    def __init__(self, view: _AncestralView, comp: int) -> None:
+    def __init__(self, view: _AncestralView, comp: int, actions: set[int], keys: Mapping[int, object]) -> None:
         g = view.g
-        self.rank = g._rank
+        self.g = g
+        self.actions = actions
         self.members = view.members[comp]
-        pa_c = view.projected_parents(comp)
-        self.nodes = set(self.members)
-        stack = [m for m in self.members if m not in pa_c]
-        while stack:
-            for p in g._pa[stack.pop()]:
-                if p not in self.nodes:
-                    self.nodes.add(p)
-                    if p not in pa_c:
-                        stack.append(p)
-        self.nodes |= pa_c
-        self.order = sorted(self.nodes, key=self.rank.__getitem__, reverse=True)
-        self.children = {v: [c for c in g._ch[v] if c in self.nodes] for v in self.nodes}
-        self.open_members: frozenset[int] | None = None
+        parents, between = view.latent_ancestry(comp)
+        self.held = parents.difference(self.members)
+        self.nodes = set(self.members) | parents | between
+        self.order = sorted(self.nodes, key=g._rank.__getitem__, reverse=True)
+        self.children = {v: [c for c in g._ch[v] if c in self.nodes and c not in self.held] for v in self.nodes}
+        self.open_members = {m for m in self.members if m not in keys}
         self.earliest: dict[int, tuple[tuple[int, int], ...]] = {}
+        self.latest: list[tuple[int, int]] = []  # the two latest open members, (rank, node)
+        self.stale = True
 
-    def refresh(self, keys: Mapping[int, object]) -> None:
-        open_members = frozenset(m for m in self.members if m not in keys)
-        if open_members == self.open_members:
+    def leave(self, member: int) -> None:
+        """``member`` joined ``O^X``."""
+        if member in self.open_members:
+            self.open_members.remove(member)
+            self.stale = True
+
+    def refresh(self) -> None:
+        if not self.stale:
             return
-        self.open_members = open_members
-        rank, children = self.rank, self.children
+        self.stale = False
+        rank, children, open_members = self.g._rank, self.children, self.open_members
         earliest: dict[int, tuple[tuple[int, int], ...]] = {}
         for v in self.order:
             best = {(rank[v], v)} if v in open_members else set()
@@ -293,16 +402,27 @@ class _ComponentGraph:
                 best.update(earliest[c])
             earliest[v] = tuple(sorted(best)[:2])
         self.earliest = earliest
+        self.latest = sorted(((rank[m], m) for m in open_members), reverse=True)[:2]
 
-    def separated(self, g: CausalDiagram, source: int, before_rank: int) -> bool:
-        """``O_i ⊥ O^C | O^C ∩ before(X_i)`` in ``G_C``."""
+    def separated(self, source: int, action: int, keys: Mapping[int, object]) -> bool:
+        """Whether ``O_i ⊥ O^C | O^C ∩ before(X_i)`` holds in ``G_C`` as ``G'_i`` changes it.
+
+        ``G'_i`` is the graph that Definition 2 reads the adjustment of ``X_i`` in: the
+        outgoing edges of ``X_i`` are removed, the later actions of ``O^X`` lose their
+        incoming edges (without gaining edges from their sets), and the fixed parents
+        that precede ``X_i`` are conditioned on (the sets of :func:`find_adjustment` take
+        them from the Markov boundary). Each of the three is needed for agreement with
+        the brute-force search of ``tests/test_graphs_bruteforce.py``.
+        """
+        self.refresh()
+        g, held, actions = self.g, self.held, self.actions
         open_members, rank, earliest = self.open_members, g._rank, self.earliest
-        assert open_members is not None
-        if not any(m != source and rank[m] >= before_rank for m in open_members):
+        before_rank = rank[action]
+        if not any(m != source and r >= before_rank for r, m in self.latest):
             return True
 
         def conditioned(v: int) -> bool:
-            return v in open_members and v != source and rank[v] < before_rank
+            return rank[v] < before_rank and (v in held or v in open_members and v != source)
 
         def target(v: int) -> bool:
             return v in open_members and v != source and rank[v] >= before_rank
@@ -310,53 +430,72 @@ class _ComponentGraph:
         def collider_open(v: int) -> bool:
             return any(node != source and r < before_rank for r, node in earliest[v])
 
-        path = _find_open_path(g._pa, g._ch, g._sp, [source], conditioned, collider_open, target, self.nodes.__contains__)
+        def fixed(v: int) -> bool:
+            return v in held or v in actions and v in keys and rank[v] > before_rank
+
+        path = _find_open_path(
+            g._pa, g._ch, g._sp, [source], conditioned, collider_open, target, self.nodes.__contains__,
+            cut=action, fixed=fixed,
+        )
         return path is None
 
 
-def _find_ox_map(diagram: CausalDiagram, actions: Iterable[Node], reward: Node) -> tuple[dict[int, int], _AncestralView]:
-    action_ids = set(_action_ids(diagram, actions))
-    view = _AncestralView(diagram, diagram._id(reward))
-    rank = diagram._rank
-    candidates = sorted(
-        (v for v in view.component if v != view.reward), key=rank.__getitem__, reverse=True
-    )
+def _find_ox_map(g: CausalDiagram, action_ids: list[int], y: int) -> tuple[dict[int, int], _AncestralView]:
+    actions = set(action_ids)
+    view = _AncestralView(g, y)
+    rank = g._rank
+    candidates = sorted((v for v in view.component if v != y), key=rank.__getitem__, reverse=True)
     graphs: dict[int, _ComponentGraph] = {}
 
-    def has_valid_adjustment(keys: Mapping[int, int], oi: int, xi: int) -> bool:
+    ox: dict[int, int] = {}
+
+    def has_valid_adjustment(oi: int, xi: int) -> bool:
         comp = view.component[oi]
         if comp not in graphs:
-            graphs[comp] = _ComponentGraph(view, comp)
-        gc = graphs[comp]
-        gc.refresh(keys)
-        return gc.separated(diagram, oi, rank[xi])
+            graphs[comp] = _ComponentGraph(view, comp, actions, ox)
+        return graphs[comp].separated(oi, xi, ox)
 
-    ox: dict[int, int] = {}
+    def join(oi: int, xi: int) -> None:
+        if oi not in ox and view.component[oi] in graphs:
+            graphs[view.component[oi]].leave(oi)
+        ox[oi] = xi
+
     while True:
         previous = dict(ox)
         for oi in candidates:
             children = view.ch_plus(oi, stop=ox)
             if children:
                 xi = min((ox[c] for c in children), key=rank.__getitem__)
-                if has_valid_adjustment(ox, oi, xi):
-                    ox[oi] = xi
-            elif oi in action_ids and has_valid_adjustment(ox, oi, oi):
-                ox[oi] = oi
+                if has_valid_adjustment(oi, xi):
+                    join(oi, xi)
+            elif oi in actions and has_valid_adjustment(oi, oi):
+                join(oi, oi)
         if ox == previous:
             return ox, view
 
 
-def find_ox(diagram: CausalDiagram, actions: Iterable[Node], reward: Node) -> frozenset[Node]:
+def find_ox(diagram: CausalDiagram, actions: Node | Iterable[Node], reward: Node) -> frozenset[Node]:
     """Kumor et al.'s FindOX: the largest set ``O^X`` of observed ancestors of ``reward`` from
     which sequential pi-backdoor sets can be built (a family exists iff every action that is
     an ancestor of the reward belongs to it).
 
-    Faithful to the appendix's pseudocode (and to the reference implementation's reading of
-    it): observed nodes of ``G^Y`` are visited in reverse temporal order, repeatedly, until
-    the map ``O^X -> X`` stops changing; ``ch+`` and the C-components are those of the
-    latent projection of ``G^Y``; HasValidAdjustment tests
-    ``O_i ⊥ O^C | O^C ∩ before(X_i)`` in ``G_C``, the subgraph of ``G^Y`` on ``Pa+(C)`` and
-    the latent variables in between, with ``O^C = C \\ (O^X ∪ {O_i})``.
+    Observed nodes of ``G^Y`` are visited in reverse temporal order, repeatedly, until the
+    map ``O^X -> X`` stops changing; ``ch+`` and the C-components are those of the latent
+    projection of ``G^Y``; HasValidAdjustment tests ``O_i ⊥ O^C | O^C ∩ before(X_i)``,
+    ``O^C = C \\ (O^X ∪ {O_i})``, in ``G_C``: ``Pa+(C)`` and the intermediate latent
+    variables. Where the appendix's pseudocode is terse, ``G_C`` is read as the graph that
+    Definition 2 checks ``X_i`` in: it keeps the latent variables on every latent-only path
+    into a member of ``C`` (also into members that are parents of other members), holds
+    the parents outside ``C`` fixed and conditions on those before ``X_i``, removes the
+    outgoing edges of ``X_i`` and the incoming edges of the later actions already in
+    ``O^X``. That reading, unlike the literal one, agrees with a brute-force search over
+    every family on tens of thousands of random small diagrams
+    (``tests/test_graphs_bruteforce.py``).
+
+    Args:
+        diagram: the causal diagram (latent nodes included).
+        actions: the action nodes, in temporal order (see :func:`sequential_pi_backdoor`).
+        reward: the outcome node.
 
     Examples:
         >>> g = CausalDiagram([("Z", "X"), ("Z", "Y"), ("X", "Y"), ("O", "X"), ("O", "W")],
@@ -364,5 +503,166 @@ def find_ox(diagram: CausalDiagram, actions: Iterable[Node], reward: Node) -> fr
         >>> sorted(find_ox(g, ["X"], "Y"))
         ['X']
     """
-    ox, _ = _find_ox_map(diagram, actions, reward)
-    return frozenset(diagram._nodes[v] for v in ox)
+    g, action_ids, y = _temporal(diagram, actions, reward)
+    ox, _ = _find_ox_map(g, action_ids, y)
+    return frozenset(g._nodes[v] for v in ox)
+
+
+def _certificate(g: CausalDiagram, action_ids: list[int], x: int, y: int) -> tuple[list[int], set[int]] | None:
+    """Proof that action ``x`` fails Definition 2 in every family, or None.
+
+    Emptying a later action's set only removes edges into it, which never makes the check
+    of ``x`` harder, so the graph ``G°`` where the later actions keep no incoming edge at
+    all is the most favourable ``G'_x``. When ``x`` causes ``y`` there and the set
+    ``Z* = An({x, y}) ∩ O ∩ before(x)`` leaves a path open, no admissible set separates
+    them (van der Zander et al., 2019: when any set between ``∅`` and ``R`` separates two
+    nodes, ``An`` of the pair intersected with ``R`` does), hence no family passes at
+    ``x``. Returns that open path and ``Z*``.
+    """
+    rank, latent = g._rank, g._latent
+    later = {a for a in action_ids if rank[a] > rank[x]}
+    reached = {x}
+    stack = [x]
+    while stack:
+        for c in g._ch[stack.pop()]:
+            if c not in reached and c not in later:
+                reached.add(c)
+                stack.append(c)
+    if y not in reached:
+        return None
+    favourable_parents = [() if v in later else p for v, p in enumerate(g._pa)]
+    conditioned = {
+        v for v in _ancestor_ids(favourable_parents, [x, y]) if v not in latent and rank[v] < rank[x]
+    }
+    path = _find_open_path(
+        g._pa, g._ch, g._sp, [x], conditioned.__contains__, _ancestor_ids(favourable_parents, conditioned).__contains__,
+        y.__eq__, cut=x, fixed=later.__contains__,
+    )
+    return None if path is None else (path, conditioned)
+
+
+@dataclass(frozen=True)
+class ExactAdjustment:
+    """The sequential pi-backdoor sets of one diagram, as Kumor et al. construct them.
+
+    ``Z_t = (MB ∪ BA) ∩ before(X_t)`` for a boundary action and ``∅`` otherwise
+    (Algorithm 1, lines 4-10). The sets are prefixes of one temporally sorted tuple,
+    :attr:`conditioning_order`, so they are produced on demand instead of being stored
+    (they grow linearly with ``t``).
+
+    Attributes:
+        diagram: the diagram the sets are for, with the temporal order they are read in.
+        actions: the action nodes in temporal order.
+        ox: FindOX's ``O^X``.
+        markov_boundary: ``MB = Pa+(C(Ch+(O^X))) \\ O^X`` in the projection of ``G^Y_{X'}``.
+        boundary_actions: actions in ``O^X`` with an effective child outside ``O^X``.
+    """
+
+    diagram: CausalDiagram
+    actions: tuple[Node, ...]
+    ox: frozenset[Node]
+    markov_boundary: frozenset[Node]
+    boundary_actions: frozenset[Node]
+
+    @cached_property
+    def conditioning_order(self) -> tuple[Node, ...]:
+        """``MB ∪ BA`` in temporal order: ``Z_t`` of a boundary action is its prefix before ``X_t``."""
+        rank = self.diagram._rank
+        ids = sorted((self.diagram._id(v) for v in self.markov_boundary | self.boundary_actions), key=rank.__getitem__)
+        return tuple(self.diagram._nodes[i] for i in ids)
+
+    @cached_property
+    def _conditioning_ranks(self) -> list[int]:
+        return [self.diagram._rank[self.diagram._id(v)] for v in self.conditioning_order]
+
+    def set_size(self, action: Node) -> int:
+        """``|Z_t|`` of ``action``: the length of its prefix of :attr:`conditioning_order`."""
+        if action not in self.boundary_actions:
+            if action not in self.actions:
+                raise GraphError(f"{action!r} is not an action of this diagram")
+            return 0
+        return bisect_left(self._conditioning_ranks, self.diagram._rank[self.diagram._id(action)])
+
+    def adjustment_set(self, action: Node) -> frozenset[Node]:
+        return frozenset(self.conditioning_order[: self.set_size(action)])
+
+    @property
+    def family(self) -> dict[Node, frozenset[Node]]:
+        """Every action's set (materialised; quadratic in the horizon)."""
+        return {x: self.adjustment_set(x) for x in self.actions}
+
+
+def _not_imitable(g: CausalDiagram, action_ids: list[int], failing: list[int], y: int) -> NotImitableError:
+    names = g._nodes
+    shown = ", ".join(repr(names[x]) for x in failing[:6]) + (f" and {len(failing) - 6} more" if len(failing) > 6 else "")
+    tried = failing[-8:]  # the latest ones have the fewest later actions to route around
+    for x in reversed(tried):
+        found = _certificate(g, action_ids, x, y)
+        if found is not None:
+            path, conditioned = found
+            certificate = tuple(names[v] for v in path)
+            return NotImitableError(
+                f"no sequential pi-backdoor adjustment exists: FindOX leaves out {shown}. Certificate for "
+                f"{names[x]!r}: even with every later action's set empty, it causes {names[y]!r} and "
+                f"{' ~ '.join(map(repr, certificate))} stays open given the {len(conditioned)} observed ancestors "
+                f"of {names[x]!r} and {names[y]!r} before it; when those do not separate the two, no set does",
+                actions=[names[v] for v in failing],
+                witness=certificate,
+            )
+    alone = "each of them" if len(tried) == len(failing) else f"each of the latest {len(tried)}"
+    return NotImitableError(
+        f"no sequential pi-backdoor adjustment exists: FindOX leaves out {shown}. No single action "
+        f"certifies it: {alone} could meet Definition 2 if the later actions' sets were empty, but no family "
+        "of sets meets it for all actions at once",
+        actions=[names[v] for v in failing],
+    )
+
+
+def find_adjustment(diagram: CausalDiagram, actions: Node | Iterable[Node], reward: Node) -> ExactAdjustment:
+    """Sequential pi-backdoor sets for every action, or a refusal: FindOX, the imitability
+    test, the Markov boundary and the boundary actions (Algorithm 1, lines 2-10).
+
+    Raises:
+        NotImitableError: when some action that causes the reward is left out of ``O^X``
+            (then no family meets Definition 2). It names those actions and, where one
+            exists, carries a certificate path: open for one of them under every family.
+
+    Examples:
+        >>> g = CausalDiagram([("Z", "X"), ("Z", "Y"), ("X", "Y"), ("O", "X"), ("O", "W")],
+        ...                   bidirected=[("W", "Y")], latent=["O"], nodes=["Z", "O", "W", "X", "Y"])
+        >>> sorted(find_adjustment(g, ["X"], "Y").adjustment_set("X"))
+        ['Z']
+        >>> confounded = CausalDiagram([("L", "X"), ("L", "Y"), ("X", "Y")], latent=["L"])
+        >>> try:
+        ...     find_adjustment(confounded, ["X"], "Y")
+        ... except NotImitableError as err:
+        ...     err.witness
+        ('X', 'L', 'Y')
+    """
+    g, action_ids, y = _temporal(diagram, actions, reward)
+    ox_map, view = _find_ox_map(g, action_ids, y)
+    failing = [x for x in action_ids if x in view.nodes and x not in ox_map]
+    if failing:
+        raise _not_imitable(g, action_ids, failing, y)
+    ox = set(ox_map)
+    acting = {x for x in action_ids if x in ox}
+    # Ch(O^X) in the projection of G^Y with the outgoing edges of X' = O^X ∩ X removed.
+    reached = set(ox)
+    for v in ox - acting:
+        reached.update(view.ch_plus(v) or ())
+    boundary: set[int] = set()
+    for comp in {view.component[v] for v in reached}:
+        boundary.update(view.members[comp])
+        boundary.update(view.projected_parents(comp))
+    # Removing the edges out of X' only removes projected parents in X' ⊆ O^X, which MB
+    # excludes anyway; it matters through Ch(O^X), which skips the children of X'.
+    boundary -= ox
+    boundary_actions = {x for x in acting if not set(view.ch_plus(x) or ()) <= ox}
+    names = g._nodes
+    return ExactAdjustment(
+        diagram=g,
+        actions=tuple(names[x] for x in action_ids),
+        ox=frozenset(names[v] for v in ox),
+        markov_boundary=frozenset(names[v] for v in boundary),
+        boundary_actions=frozenset(names[v] for v in boundary_actions),
+    )

@@ -72,6 +72,8 @@ def _find_open_path(
     collider_open: Callable[[int], bool],
     is_target: Callable[[int], bool],
     inside: Callable[[int], bool] | None = None,
+    cut: int = -1,
+    fixed: Callable[[int], bool] | None = None,
 ) -> list[int] | None:
     """Breadth-first Bayes-ball on a mixed graph; the shortest open path to a target, or None.
 
@@ -79,7 +81,9 @@ def _find_open_path(
     arrowhead (from a parent or a spouse) and 0 when it entered through a tail (from a
     child). Each state is expanded at most once, so the search is O(V + E). ``blocked`` is
     the conditioning set, ``collider_open`` its ancestral closure (colliders pass only
-    there), ``inside`` restricts the search to an induced subgraph.
+    there), ``inside`` restricts the search to an induced subgraph. Edges can be deleted
+    without copying the graph: ``cut`` is a node whose outgoing edges are absent, ``fixed``
+    marks the nodes whose incoming edges (directed and bidirected) are absent.
     """
     prev: dict[int, int] = {}
     queue: deque[int] = deque()
@@ -97,21 +101,26 @@ def _find_open_path(
                 walk.append(state >> 1)
                 state = prev[state]
             return _simple_path(walk[::-1])
+        down = () if v == cut else children[v]
         moves: list[int] = []
         if state & 1:
             if collider_open(v):
-                moves.extend(2 * p for p in parents[v])
+                moves.extend(2 * p for p in parents[v] if p != cut)
                 moves.extend(2 * s + 1 for s in spouses[v])
             if not blocked(v):
-                moves.extend(2 * c + 1 for c in children[v])
+                moves.extend(2 * c + 1 for c in down)
         elif origin or not blocked(v):
-            moves.extend(2 * c + 1 for c in children[v])
-            moves.extend(2 * p for p in parents[v])
-            moves.extend(2 * s + 1 for s in spouses[v])
+            moves.extend(2 * c + 1 for c in down)
+            if fixed is None or not fixed(v):
+                moves.extend(2 * p for p in parents[v] if p != cut)
+                moves.extend(2 * s + 1 for s in spouses[v])
         for nxt in moves:
-            if nxt not in prev and (inside is None or inside(nxt >> 1)):
-                prev[nxt] = state
-                queue.append(nxt)
+            if nxt in prev or (inside is not None and not inside(nxt >> 1)):
+                continue
+            if nxt & 1 and fixed is not None and fixed(nxt >> 1):
+                continue
+            prev[nxt] = state
+            queue.append(nxt)
     return None
 
 
@@ -126,6 +135,9 @@ class CausalDiagram:
         nodes: extra, possibly isolated, nodes.
         order: an explicit topological order of all nodes, used for "before" and for the
             extended parents; defaults to a topological sort that breaks ties by insertion.
+            Without it, the sequential criteria read "before an action" as "not a
+            descendant of it or of a later action" (see
+            :func:`~torchrl_causal.graphs.sequential_pi_backdoor`).
 
     Raises:
         GraphError: on a self-loop, a directed cycle (named), a latent node that is not in
@@ -155,7 +167,10 @@ class CausalDiagram:
         names: list[Node] = []
 
         def add(v: Node) -> int:
-            i = index.get(v)
+            try:
+                i = index.get(v)
+            except TypeError:
+                raise GraphError(f"nodes must be hashable, got {v!r} ({type(v).__name__})") from None
             if i is None:
                 i = index[v] = len(names)
                 names.append(v)
@@ -182,14 +197,74 @@ class CausalDiagram:
         self._sp: list[tuple[int, ...]] = [tuple(sorted(s)) for s in sp]
         latent_ids = set()
         for v in latent:
-            if v not in index:
+            if v not in self:
                 raise GraphError(f"latent node {v!r} is not in the diagram")
             latent_ids.add(index[v])
         self._latent = frozenset(latent_ids)
-        self._order = self._topological_order(order)
-        self._rank = [0] * n
-        for r, i in enumerate(self._order):
+        self._set_order(self._topological_order(order), explicit=order is not None)
+
+    @classmethod
+    def from_indices(
+        cls,
+        nodes: Sequence[Node],
+        directed: Iterable[tuple[int, int]],
+        bidirected: Iterable[tuple[int, int]] = (),
+        latent: Iterable[int] = (),
+    ) -> CausalDiagram:
+        """A diagram over ``nodes``, taken as its (explicit, topological) order, with edges and
+        latent nodes given by position in ``nodes``. It skips the name lookups of the main
+        constructor, which dominate on long unrolled diagrams.
+
+        Raises:
+            GraphError: on an unhashable or repeated node, a position out of range, a
+                directed edge that does not point forward in ``nodes``, or a bidirected
+                self-loop.
+
+        Examples:
+            >>> CausalDiagram.from_indices(["Z", "X", "Y"], [(0, 1), (1, 2)], [(0, 2)]).bidirected_edges
+            (('Z', 'Y'),)
+        """
+        names = list(nodes)
+        try:
+            index = {v: i for i, v in enumerate(names)}
+        except TypeError:
+            bad = next(v for v in names if not isinstance(v, Hashable))
+            raise GraphError(f"nodes must be hashable, got {bad!r} ({type(bad).__name__})") from None
+        if len(index) != len(names):
+            raise GraphError(f"node {next(v for i, v in enumerate(names) if index[v] != i)!r} is listed twice")
+        n = len(names)
+        pa: list[set[int]] = [set() for _ in range(n)]
+        ch: list[set[int]] = [set() for _ in range(n)]
+        sp: list[set[int]] = [set() for _ in range(n)]
+        for a, b in directed:
+            if not 0 <= a < b < n:
+                raise GraphError(f"directed edge {(a, b)} must point forward within the {n} nodes")
+            pa[b].add(a)
+            ch[a].add(b)
+        for a, b in bidirected:
+            if not (0 <= a < n and 0 <= b < n) or a == b:
+                raise GraphError(f"bidirected edge {(a, b)} must join two distinct nodes among the {n}")
+            sp[a].add(b)
+            sp[b].add(a)
+        latent_ids = frozenset(latent)
+        if not all(0 <= i < n for i in latent_ids):
+            raise GraphError(f"latent positions must lie within the {n} nodes")
+        diagram = object.__new__(cls)
+        diagram._nodes = names
+        diagram._index = index
+        diagram._pa = [tuple(sorted(x)) for x in pa]
+        diagram._ch = [tuple(sorted(x)) for x in ch]
+        diagram._sp = [tuple(sorted(x)) for x in sp]
+        diagram._latent = latent_ids
+        diagram._set_order(list(range(n)), explicit=True)
+        return diagram
+
+    def _set_order(self, order: list[int], explicit: bool) -> None:
+        self._order = order
+        self._rank = [0] * len(order)
+        for r, i in enumerate(order):
             self._rank[i] = r
+        self._explicit_order = explicit
 
     # ------------------------------------------------------------------ construction
     @staticmethod
@@ -207,7 +282,7 @@ class CausalDiagram:
         if order is not None:
             ids = []
             for v in order:
-                if v not in self._index:
+                if v not in self:
                     raise GraphError(f"order names {v!r}, which is not in the diagram")
                 ids.append(self._index[v])
             if len(ids) != n or len(set(ids)) != n:
@@ -333,6 +408,24 @@ class CausalDiagram:
 
     def topological_order(self) -> tuple[Node, ...]:
         return self.nodes
+
+    @property
+    def has_explicit_order(self) -> bool:
+        """Whether the diagram was built with an ``order`` (else its order is a default
+        topological sort, and "before" is decided per query from the actions)."""
+        return self._explicit_order
+
+    def with_order(self, order: Sequence[Node]) -> CausalDiagram:
+        """The same diagram with an explicit topological ``order`` of all its nodes.
+
+        Raises:
+            GraphError: when ``order`` misses a node, names an unknown one, or puts a node
+                before one of its parents.
+        """
+        copy = object.__new__(CausalDiagram)
+        copy.__dict__.update(self.__dict__)
+        copy._set_order(self._topological_order(order), explicit=True)
+        return copy
 
     def before(self, v: Node) -> frozenset[Node]:
         """Nodes strictly earlier than ``v`` in the topological order."""

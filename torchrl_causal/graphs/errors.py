@@ -1,10 +1,21 @@
-"""Exceptions raised by the causal graph engine."""
+"""Exceptions raised by the causal graph engine.
+
+A refusal to give an adjustment says which step failed, each with its own error:
+
+* :class:`NotImitableError`: no family of sets meets Definition 2 (FindOX leaves out an
+  action); ``witness`` is a certificate path that no choice of sets can block.
+* :class:`BoundedInfluenceError`: Assumption 1(i) fails for the requested ``k``; ``chain``
+  is the path that makes an extended parent too early.
+* :class:`WindowConstructionError`: the windowed construction fails at a horizon:
+  ``witness`` stays open there under every window tried, although the diagram itself may
+  be imitable (``exact_adjustment`` may still succeed).
+"""
 
 from __future__ import annotations
 
 from collections.abc import Hashable, Sequence
 
-__all__ = ["GraphError", "NotImitableError", "BoundedInfluenceError"]
+__all__ = ["BoundedInfluenceError", "GraphError", "NotImitableError", "WindowConstructionError"]
 
 
 class GraphError(ValueError):
@@ -14,7 +25,21 @@ class GraphError(ValueError):
 
 class BoundedInfluenceError(GraphError):
     """Assumption 1(i) (k-bounded influence) fails for the requested window size, so the
-    windowed adjustment of Theorem 1 would not be guaranteed valid."""
+    windowed adjustment of Theorem 1 would not be guaranteed valid.
+
+    Attributes:
+        k: the window size asked for.
+        required_k: the smallest sufficient k, or None when no k suffices.
+        chain: the path in the latent projection that makes an extended parent so early.
+    """
+
+    def __init__(
+        self, message: str, k: int | None = None, required_k: int | None = None, chain: Sequence[Hashable] = ()
+    ) -> None:
+        super().__init__(message)
+        self.k = k
+        self.required_k = required_k
+        self.chain = tuple(chain)
 
 
 class NotImitableError(ValueError):
@@ -22,11 +47,32 @@ class NotImitableError(ValueError):
 
     Attributes:
         actions: the action nodes for which no admissible set exists, in temporal order.
-        witness: a path (tuple of nodes) that stays open for one of them under the largest
-            candidate adjustment (every observed ancestor of the reward before the action).
+        witness: a certificate: a path from one of them to the reward that stays open
+            whatever the sets (empty when no single path shows it).
     """
 
     def __init__(self, message: str, actions: Sequence[Hashable] = (), witness: Sequence[Hashable] = ()) -> None:
         super().__init__(message)
         self.actions = tuple(actions)
         self.witness = tuple(witness)
+
+
+class WindowConstructionError(NotImitableError):
+    """Algorithm 1's windowed construction fails: no window tried meets Definition 2 at
+    :attr:`horizon`, though the proxy is imitable and Assumption 1 holds.
+
+    It derives from :class:`NotImitableError` only so that code that catches every refusal
+    of ``windowed_adjustment`` that way keeps working; it does not say that no adjustment
+    exists (catch it first to tell the two apart).
+
+    Attributes:
+        actions: the actions whose Definition-2 check fails at :attr:`horizon`.
+        witness: an open path at :attr:`horizon` under the window Algorithm 1 built.
+        horizon: the horizon of the unrolled diagram the failure was found at.
+    """
+
+    def __init__(
+        self, message: str, actions: Sequence[Hashable] = (), witness: Sequence[Hashable] = (), horizon: int = 0
+    ) -> None:
+        super().__init__(message, actions, witness)
+        self.horizon = horizon

@@ -48,7 +48,7 @@ class TimeSliceTemplate:
     state, so it may not have lag-0 children.
 
     Raises:
-        GraphError: on duplicate names, an action that is not a variable or not observed,
+        GraphError: on duplicate names, a variable named ``"Y"`` (the reward), an action that is not a variable or not observed,
             an observed set that is not a subset of the variables, an edge naming an
             unknown variable, a negative or non-int lag, a lag-0 cycle or self-loop, or an
             unknown ``reward_slices``.
@@ -87,8 +87,10 @@ class TimeSliceTemplate:
                 raise GraphError(f"variable names must be non-empty strings, got {v!r}")
             if v in seen:
                 raise GraphError(f"duplicate variable name {v!r}")
+            if v == REWARD:
+                raise GraphError(f"the variable name {REWARD!r} is reserved for the terminal reward node")
             seen.add(v)
-        if self.action not in seen:
+        if not isinstance(self.action, str) or self.action not in seen:
             raise GraphError(f"action {self.action!r} is not among the variables {variables}")
         observed_in = set(self._names(self.observed, "observed"))
         if self.action not in observed_in:
@@ -123,7 +125,7 @@ class TimeSliceTemplate:
         known = set(self.variables) if known is None else known
         result = []
         for v in names:
-            if v not in known:
+            if not isinstance(v, str) or v not in known:
                 raise GraphError(f"{what} names {v!r}, which is not a variable ({sorted(known)})")
             if v not in result:
                 result.append(v)
@@ -138,7 +140,7 @@ class TimeSliceTemplate:
             except (TypeError, ValueError):
                 raise GraphError(f"a {what} edge must be a triple (src, dst, lag), got {edge!r}") from None
             for v in (a, b):
-                if v not in known:
+                if not isinstance(v, str) or v not in known:
                     raise GraphError(f"{what} edge {edge!r} names unknown variable {v!r}")
             triple = (a, b, _check_lag(lag, f"{what} edge {edge!r}"))
             if triple not in result:
@@ -228,16 +230,21 @@ class TimeSliceTemplate:
         if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
             raise GraphError(f"horizon must be an int >= 1, got {horizon!r}")
         last = {v: self.last_slice(v, horizon) for v in self.variables}
+        # Slices hold slice_order (the action last, absent from slice H), so (v, t) sits at
+        # t * width + slot[v] and Y last.
+        width = len(self.slice_order)
+        slot = {v: i for i, v in enumerate(self.slice_order)}
         order: list[object] = [(v, t) for t in range(horizon + 1) for v in self.slice_order if t <= last[v]]
         order.append(REWARD)
+        y = len(order) - 1
         directed = [
-            ((src, t - lag), (dst, t))
+            ((t - lag) * width + slot[src], t * width + slot[dst])
             for src, dst, lag in self.directed
             for t in range(lag, last[dst] + 1)
             if t - lag <= last[src]
         ]
         bidirected = [
-            ((a, t - lag), (b, t))
+            ((t - lag) * width + slot[a], t * width + slot[b])
             for a, b, lag in self.bidirected
             for t in range(lag, last[b] + 1)
             if t - lag <= last[a]
@@ -246,13 +253,7 @@ class TimeSliceTemplate:
         def slices(v: str) -> range:
             return range(last[v], last[v] + 1) if self.reward_slices == "last" else range(last[v] + 1)
 
-        directed += [((v, t), REWARD) for v in self.reward_parents for t in slices(v)]
-        bidirected += [((v, t), REWARD) for v in self.reward_bidirected for t in slices(v)]
-        latent = set(self.latent)
-        return CausalDiagram(
-            directed,
-            bidirected,
-            [node for node in order if node != REWARD and node[0] in latent],  # type: ignore[index]
-            nodes=order,
-            order=order,
-        )
+        directed += [(t * width + slot[v], y) for v in self.reward_parents for t in slices(v)]
+        bidirected += [(t * width + slot[v], y) for v in self.reward_bidirected for t in slices(v)]
+        latent = [t * width + slot[v] for v in self.latent for t in range(last[v] + 1)]
+        return CausalDiagram.from_indices(order, directed, bidirected, latent)

@@ -44,9 +44,12 @@ class AdjustmentWindow:
         exact: ``True`` when the per-step sets provably satisfy the sequential
             pi-backdoor criterion (Definition 2); ``False`` for relaxed or non-causal
             windows.
-        witnesses: paths (tuples of nodes ``(var, t)`` or ``"Y"`` in the horizon-(k+1)
-            proxy graph) that stay open under this window; empty when ``exact``.
+        witnesses: paths (tuples of nodes ``(var, t)`` or ``"Y"``) that stay open under
+            this window in the unrolled diagrams it was checked on; empty when ``exact``.
         observed: every variable the imitator observes, in template order.
+        lags_beyond_k: template edges ``(kind, src, dst, lag)`` (kind ``"directed"`` or
+            ``"bidirected"``) whose lag exceeds ``k``, so that their far end lies outside
+            the window.
 
     Examples:
         >>> w = AdjustmentWindow(k=2, action="X", lags={"P": (0, 1, 2), "X": (1, 2)},
@@ -69,6 +72,7 @@ class AdjustmentWindow:
     exact: bool = False
     witnesses: tuple[tuple[Node, ...], ...] = ()
     observed: tuple[str, ...] = field(default=())
+    lags_beyond_k: tuple[tuple[str, str, str, int], ...] = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.k, int) or self.k < 0:
@@ -82,6 +86,7 @@ class AdjustmentWindow:
                 raise ValueError(f"the action {var!r} cannot be conditioned on at lag 0 (it is being chosen)")
         object.__setattr__(self, "lags", {var: tuple(v) for var, v in self.lags.items()})
         object.__setattr__(self, "excluded", frozenset(self.excluded))
+        object.__setattr__(self, "lags_beyond_k", tuple(tuple(edge) for edge in self.lags_beyond_k))
 
     @property
     def variables(self) -> tuple[str, ...]:
@@ -138,6 +143,8 @@ class AdjustmentWindow:
             "exact": self.exact,
             "witnesses": [[_node_to_json(n) for n in path] for path in self.witnesses],
             "observed": list(self.observed),
+            # only when there are some, so that descriptions saved before the field existed match
+            **({"lags_beyond_k": [list(edge) for edge in self.lags_beyond_k]} if self.lags_beyond_k else {}),
         }
 
     @classmethod
@@ -153,4 +160,5 @@ class AdjustmentWindow:
             exact=bool(data.get("exact", False)),
             witnesses=tuple(tuple(_node_from_json(n) for n in path) for path in data.get("witnesses", ())),
             observed=tuple(data.get("observed", ())),
+            lags_beyond_k=tuple(tuple(edge) for edge in data.get("lags_beyond_k", ())),
         )
