@@ -22,7 +22,8 @@ ALGOS = ("bc", "gail", "sqil", "iq_learn", "expert")
 PAPER_SHARED = {
     "bc": {"actor.hidden": 256, "actor.blocks": 4, "actor.dropout": 0.0, "lr": 3e-4, "batch_size": 2048,
            "val_fraction": 0.2},
-    "gail": {"actor.hidden": 256, "actor.blocks": 3, "actor.dropout": 0.05, "lr_actor": 1e-4, "lr_critic": 3e-4,
+    "gail": {"actor.hidden": 256, "actor.blocks": 3, "actor.dropout": 0.0,  # 0.05 in the paper: see gail.yaml
+             "lr_actor": 1e-4, "lr_critic": 3e-4,
              "batch_size": 1024, "gamma": 0.99, "max_grad_norm": 0.5, "clip_epsilon": 0.2, "gae_lambda": 0.95,
              "entropy_coef": 1e-2, "critic_coef": 0.5, "normalize_advantage": True, "lr_discriminator": 3e-4,
              "discriminator.dropout": 0.2, "discriminator_updates": 2, "discriminator_batch_size": 1024,
