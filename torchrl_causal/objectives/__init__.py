@@ -9,7 +9,7 @@ logits) and TorchRL's :class:`~torchrl.objectives.ClipPPOLoss` with
 :class:`DiscriminatorReward` feeding the discriminator's reward to PPO.
 """
 
-from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingStateValue, add_absorbing_transitions
+from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingIndicator, add_absorbing_transitions
 from torchrl_causal.objectives.bc import HuberBCLoss
 from torchrl_causal.objectives.expert_sac import ALPHA_CLAMP, ExpertFlaggedSACLoss
 from torchrl_causal.objectives.gail import (
@@ -27,7 +27,7 @@ from torchrl_causal.objectives.utils import eval_mode
 __all__ = [
     "ABSORBING_KEY",
     "ALPHA_CLAMP",
-    "AbsorbingStateValue",
+    "AbsorbingIndicator",
     "DiscriminatorReward",
     "ExpertFlaggedSACLoss",
     "GAILDiscriminatorLoss",

@@ -11,10 +11,8 @@ so that the absorbing state's reward is learned like any other state's.
 
 The replay-buffer format marks these rows with a boolean ``"absorbing"`` flag (and
 ``("next", "absorbing")``); :func:`add_absorbing_transitions` converts a flat batch of
-transitions, and :class:`AbsorbingStateValue` wraps a Q-network or a discriminator so
-that every row flagged absorbing gets one learned scalar instead of the network's
-output (every action in the absorbing state leads back to it, so its value does not
-depend on the action).
+transitions, and :class:`AbsorbingIndicator` feeds the flag to a Q-network or a
+discriminator as one more input feature.
 """
 
 from __future__ import annotations
@@ -25,9 +23,8 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from tensordict.utils import NestedKey
-from torch import nn
 
-__all__ = ["ABSORBING_KEY", "AbsorbingStateValue", "add_absorbing_transitions"]
+__all__ = ["ABSORBING_KEY", "AbsorbingIndicator", "add_absorbing_transitions"]
 
 #: The replay-buffer key of the absorbing-state flag (``("next", ABSORBING_KEY)`` for the next state).
 ABSORBING_KEY = "absorbing"
@@ -110,43 +107,46 @@ def add_absorbing_transitions(
     return torch.cat([out, absorbing], dim=0)
 
 
-class AbsorbingStateValue(TensorDictModuleBase):
-    """Replaces a network's output by one learned scalar on rows flagged absorbing.
+class AbsorbingIndicator(TensorDictModuleBase):
+    """Feeds a network its observation with the absorbing flag appended as one more feature.
 
-    Wraps a Q-network or a discriminator (a module with one output key). The network
-    runs on every row; where ``absorbing_key`` is True its output is replaced by the
-    parameter :attr:`absorbing_value` (initialised to ``init``), so the gradient of
-    those rows reaches only that parameter. Passed to a loss that copies its critics
-    (SAC's twin critics), each copy gets its own absorbing value and target.
+    Wraps a Q-network or a discriminator built for ``observation_dim + 1`` input
+    features: the flag (0 or 1) is concatenated to ``observation_key`` before the
+    network runs, as in Kostrikov et al.'s absorbing-state indicator, so the network
+    learns the absorbing state's value with all of its parameters (the absorbing
+    state's observation itself is all zeros). Passed to a loss that copies its critics
+    (SAC's twin critics), every copy reads the flag.
 
     Args:
-        network (TensorDictModuleBase): the wrapped module, with a single out key.
+        network (TensorDictModuleBase): the wrapped module, reading ``observation_key``.
 
     Keyword Args:
-        absorbing_key (NestedKey, optional): the boolean flag read from the input.
-            Defaults to ``"absorbing"``.
-        init (float, optional): initial absorbing value. Defaults to ``0.0``.
+        observation_key (NestedKey, optional): the input the flag is appended to.
+            Defaults to ``"observation"``.
+        absorbing_key (NestedKey, optional): the boolean flag. Defaults to ``"absorbing"``.
 
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import Bounded
         >>> from torchrl_causal.modules import make_qvalue_network
-        >>> q = AbsorbingStateValue(make_qvalue_network(3, Bounded(-1.0, 1.0, shape=(2,)), hidden=8), init=5.0)
-        >>> td = TensorDict({"observation": torch.randn(2, 3), "action": torch.zeros(2, 2),
+        >>> q = AbsorbingIndicator(make_qvalue_network(3 + 1, Bounded(-1.0, 1.0, shape=(2,)), hidden=8))
+        >>> td = TensorDict({"observation": torch.zeros(2, 3), "action": torch.zeros(2, 2),
         ...                  "absorbing": torch.tensor([[False], [True]])}, [2])
-        >>> q(td)["state_action_value"][1].item()
-        5.0
+        >>> values = q(td)["state_action_value"]
+        >>> values.shape, bool(values[0] != values[1]), td["observation"].shape
+        (torch.Size([2, 1]), True, torch.Size([2, 3]))
     """
 
-    def __init__(self, network: TensorDictModuleBase, *, absorbing_key: NestedKey = ABSORBING_KEY,
-                 init: float = 0.0) -> None:
+    def __init__(self, network: TensorDictModuleBase, *, observation_key: NestedKey = "observation",
+                 absorbing_key: NestedKey = ABSORBING_KEY) -> None:
         super().__init__()
-        if len(network.out_keys) != 1:
-            raise ValueError(f"AbsorbingStateValue wraps a module with one out key, got {network.out_keys}.")
+        if observation_key not in network.in_keys:
+            raise KeyError(f"AbsorbingIndicator appends the flag to {observation_key!r}, "
+                           f"which the network does not read (in_keys {network.in_keys}).")
         self.network = network
+        self.observation_key = observation_key
         self.absorbing_key = absorbing_key
-        self.absorbing_value = nn.Parameter(torch.tensor(float(init)))
         self.in_keys = [*network.in_keys, absorbing_key]
         self.out_keys = list(network.out_keys)
 
@@ -157,7 +157,10 @@ class AbsorbingStateValue(TensorDictModuleBase):
                 f"{type(self).__name__} needs the boolean absorbing flag {self.absorbing_key!r}; "
                 f"found keys {list(tensordict.keys(True, True))}."
             )
-        tensordict = self.network(tensordict)
-        value = tensordict.get(self.out_keys[0])
-        tensordict.set(self.out_keys[0], torch.where(flag, self.absorbing_value.to(value.dtype), value))
+        observation = tensordict.get(self.observation_key)
+        inputs = tensordict.select(*self.network.in_keys)
+        inputs.set(self.observation_key, torch.cat([observation, flag.to(observation.dtype)], dim=-1))
+        outputs = self.network(inputs)
+        for key in self.out_keys:
+            tensordict.set(key, outputs.get(key))
         return tensordict

@@ -18,7 +18,7 @@ from tensordict.nn import ProbabilisticTensorDictSequential, TensorDictModule
 from tensordict.utils import NestedKey
 from torchrl.objectives import SACLoss
 
-from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingStateValue
+from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingIndicator
 from torchrl_causal.objectives.utils import eval_mode
 
 __all__ = ["ALPHA_CLAMP", "ExpertFlaggedSACLoss"]
@@ -41,10 +41,10 @@ class ExpertFlaggedSACLoss(SACLoss):
     dropout mask (the actor loss keeps dropout as a regulariser).
 
     With ``absorbing=True`` the critic is wrapped in
-    :class:`~torchrl_causal.objectives.absorbing.AbsorbingStateValue`: rows whose
-    ``"absorbing"`` flag (or ``("next", "absorbing")`` for the bootstrap) is True get
-    each critic's learned absorbing value. Batches then come from
-    :func:`~torchrl_causal.objectives.absorbing.add_absorbing_transitions`, so goal
+    :class:`~torchrl_causal.objectives.absorbing.AbsorbingIndicator`, so it reads the
+    ``"absorbing"`` flag (``("next", "absorbing")`` for the bootstrap) as one more
+    input feature: build it for ``observation_dim + 1`` features. Batches then come from
+    :func:`~torchrl_causal.objectives.absorbing.add_absorbing_transitions`, and goal
     termination no longer makes the episode's end worth zero.
 
     Args:
@@ -92,7 +92,7 @@ class ExpertFlaggedSACLoss(SACLoss):
         if not 0.0 < min_alpha <= max_alpha:
             raise ValueError(f"need 0 < min_alpha <= max_alpha, got min_alpha={min_alpha}, max_alpha={max_alpha}.")
         if absorbing:
-            qvalue_network = AbsorbingStateValue(qvalue_network)
+            qvalue_network = AbsorbingIndicator(qvalue_network)
         super().__init__(
             actor_network,
             qvalue_network,
@@ -107,7 +107,7 @@ class ExpertFlaggedSACLoss(SACLoss):
     @property
     def absorbing(self) -> bool:
         """Whether the critics read the absorbing-state flags."""
-        return isinstance(self.qvalue_network, AbsorbingStateValue)
+        return isinstance(self.qvalue_network, AbsorbingIndicator)
 
     def _set_in_keys(self) -> None:
         super()._set_in_keys()

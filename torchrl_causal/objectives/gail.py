@@ -31,7 +31,7 @@ from tensordict.utils import NestedKey
 from torchrl.objectives import ClipPPOLoss, GAILLoss
 from torchrl.objectives.utils import ValueEstimators
 
-from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingStateValue
+from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingIndicator
 from torchrl_causal.objectives.utils import eval_mode
 
 __all__ = [
@@ -65,10 +65,10 @@ class GAILDiscriminatorLoss(GAILLoss):
     ``"gp_loss"`` is reported detached.
 
     With a discriminator wrapped in
-    :class:`~torchrl_causal.objectives.absorbing.AbsorbingStateValue`, expert and
+    :class:`~torchrl_causal.objectives.absorbing.AbsorbingIndicator`, expert and
     policy rows also carry an absorbing flag (``expert_absorbing`` /
     ``collector_absorbing`` keys); pairs with an absorbing end are left out of the
-    penalty, which constrains the network, not the absorbing state's scalar.
+    penalty (a path toward the absorbing state's zero observation crosses no real state).
 
     Args:
         discriminator_network (TensorDictModule): writes the logit at ``"d_logits"``.
@@ -114,7 +114,7 @@ class GAILDiscriminatorLoss(GAILLoss):
     @property
     def absorbing(self) -> bool:
         """Whether the discriminator reads absorbing-state flags."""
-        return isinstance(self.discriminator_network, AbsorbingStateValue)
+        return isinstance(self.discriminator_network, AbsorbingIndicator)
 
     def _set_in_keys(self) -> None:
         super()._set_in_keys()
@@ -190,7 +190,7 @@ class DiscriminatorReward(TensorDictModuleBase):
     Absorbing states remove the remaining bias of either reward.
 
     With a discriminator wrapped in
-    :class:`~torchrl_causal.objectives.absorbing.AbsorbingStateValue` (absorbing
+    :class:`~torchrl_causal.objectives.absorbing.AbsorbingIndicator` (absorbing
     states) every terminal step, ``terminated`` True, also receives the discounted
     return of staying in the absorbing state for ever, :math:`\gamma r_a / (1 - \gamma)`
     with :math:`r_a` the reward of the absorbing state's logit: GAE does not bootstrap
@@ -239,7 +239,7 @@ class DiscriminatorReward(TensorDictModuleBase):
             raise KeyError(f"discriminator writes {discriminator.out_keys}, not the logits key {logits_key!r}.")
         if reward not in GAIL_REWARDS:
             raise ValueError(f"reward must be one of {GAIL_REWARDS}, got {reward!r}.")
-        self.absorbing = isinstance(discriminator, AbsorbingStateValue)
+        self.absorbing = isinstance(discriminator, AbsorbingIndicator)
         if self.absorbing and not (gamma is not None and 0.0 <= gamma < 1.0):
             raise ValueError(f"an absorbing-state discriminator needs gamma in [0, 1), got {gamma!r}.")
         self.discriminator = discriminator
@@ -340,8 +340,9 @@ def make_gail_losses(
     expert/policy interpolates. PPO uses clipping ``clip_epsilon``, an entropy bonus, a
     squared-error value loss weighted by ``critic_coeff``, normalised advantages and
     GAE(``gamma``, ``gae_lambda``) on the reward that :class:`DiscriminatorReward` writes
-    (``reward``). ``absorbing=True`` wraps the discriminator in
-    :class:`~torchrl_causal.objectives.absorbing.AbsorbingStateValue`.
+    (``reward``). ``absorbing=True`` wraps the discriminator, built for
+    ``observation_dim + 1`` input features, in
+    :class:`~torchrl_causal.objectives.absorbing.AbsorbingIndicator`.
 
     PPO's ratio compares the loss's log-probability with the one recorded at
     collection, so roll out and train the actor in the same mode: without dropout
@@ -381,7 +382,7 @@ def make_gail_losses(
         ['gp_loss', 'loss']
     """
     if absorbing:
-        discriminator = AbsorbingStateValue(discriminator)
+        discriminator = AbsorbingIndicator(discriminator)
     discriminator_loss = GAILDiscriminatorLoss(discriminator, use_grad_penalty=True, gp_lambda=gp_lambda)
     policy_loss = ClipPPOLoss(
         actor,

@@ -72,7 +72,8 @@ class GAILTrainer(Trainer):
         self.losses = make_gail_losses(
             self.build_policy(self.cfg, self.env),
             make_gail_value_network(dim, hidden=int(algo.value.hidden)),
-            make_gail_discriminator(dim, self.env.action_spec, hidden=int(algo.discriminator.hidden),
+            make_gail_discriminator(dim + bool(algo.absorbing), self.env.action_spec,
+                                    hidden=int(algo.discriminator.hidden),
                                     dropout=float(algo.discriminator.dropout)),
             gamma=float(algo.gamma), gae_lambda=float(algo.gae_lambda), clip_epsilon=float(algo.clip_epsilon),
             entropy_coeff=float(algo.entropy_coef), critic_coeff=float(algo.critic_coef),

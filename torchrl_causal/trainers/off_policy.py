@@ -75,7 +75,9 @@ class OffPolicyILTrainer(Trainer):
     def _make_loss(self, env: EnvBase) -> SQILLoss | IQLearnLoss:
         algo = self.cfg.algo
         actor = self.build_policy(self.cfg, env)
-        critic = make_qvalue_network(observation_dim(env), env.action_spec, hidden=int(algo.critic.hidden),
+        # With absorbing states the critic also reads the absorbing flag as one more feature.
+        critic = make_qvalue_network(observation_dim(env) + bool(algo.absorbing), env.action_spec,
+                                     hidden=int(algo.critic.hidden),
                                      num_blocks=int(algo.critic.blocks), dropout=float(algo.critic.dropout))
         kwargs: dict[str, Any] = dict(alpha_init=float(algo.alpha_init), min_alpha=float(algo.alpha_min),
                                       max_alpha=float(algo.alpha_max), target_entropy=algo.target_entropy,
