@@ -131,19 +131,22 @@ class GAILTrainer(Trainer):
                 loss.backward()
                 torch.nn.utils.clip_grad_norm_(params, float(algo.max_grad_norm))
                 self.policy_optimizer.step()
-                for key in ("loss_objective", "loss_critic", "loss_entropy"):
+                for key in ("loss_objective", "loss_critic", "loss_entropy", "clip_fraction"):
                     sums[key] = sums.get(key, 0.0) + out[key].item()
                 count += 1
         return {f"train/{k}": v / count for k, v in sums.items()}
 
-    def train_step(self) -> Mapping[str, float]:
-        algo = self.cfg.algo
+    def collect(self) -> TensorDictBase:
+        """One round's rollout, ``[episodes_per_round, horizon]`` with time last."""
         if self.collector is None:
             self.env.set_seed(int(self.cfg.seed) * 1_000_003 + self.progress)
-            frames = int(algo.episodes_per_round) * int(self.cfg.env.horizon)
+            frames = int(self.cfg.algo.episodes_per_round) * int(self.cfg.env.horizon)
             self.collector = iter(Collector(self.env, self.policy, frames_per_batch=frames, total_frames=-1, device="cpu",
                                             auto_register_policy_transforms=False))
-        rollout = next(self.collector)  # [episodes_per_round, horizon], time last
+        return next(self.collector)
+
+    def train_step(self) -> Mapping[str, float]:
+        rollout = self.collect()
         policy_rows = self._discriminator_rows(rollout.reshape(-1).select(*TRANSITION_KEYS))
         scalars = {"train/env_reward_per_step": rollout["next", "reward"].mean().item(),
                    "train/loss_discriminator": self._update_discriminator(policy_rows)}

@@ -146,9 +146,9 @@ class OffPolicyILTrainer(Trainer):
         )
 
     def train_step(self) -> Mapping[str, float]:
-        if self.collector is None:
-            self.collector = iter(self._make_collector())
-        with eval_mode(self.policy):
+        with eval_mode(self.policy):  # the collector also probes the policy when it is built
+            if self.collector is None:
+                self.collector = iter(self._make_collector())
             batch = next(self.collector)
         transitions = batch.reshape(-1).select(*_COLLECTED_KEYS)
         transitions.set("expert", torch.zeros((*transitions.batch_size, 1), dtype=torch.bool))
