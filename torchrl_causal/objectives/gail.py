@@ -178,9 +178,9 @@ class DiscriminatorReward(TensorDictModuleBase):
 
     ``reward="logit"`` (default) writes :math:`\ell` itself; ``reward="positive"``
     writes :math:`-\log(1 - D) = \operatorname{softplus}(\ell)`, GAIL's original reward.
-    The positive reward is at least :math:`\log 2 \approx 0.69` wherever the
-    discriminator is unsure, so with goal termination (no bootstrap) and horizon
-    truncation (bootstrap), staying out of the goal is worth about
+    The positive reward is positive everywhere and :math:`\log 2 \approx 0.69` where
+    the discriminator cannot tell (``D = 1/2``), so with goal termination (no bootstrap)
+    and horizon truncation (bootstrap), staying out of the goal is worth about
     :math:`0.69/(1 - \gamma)` and entering it about :math:`0.69`: it teaches the policy
     to avoid the goal (Kostrikov et al., 2019, call it survival bias). The logit is zero
     at chance and is, for the optimal discriminator, :math:`\log \rho_E / \rho_\pi`, so
@@ -285,12 +285,14 @@ def gail_discriminator_batch(loss: GAILLoss, expert: TensorDictBase, policy: Ten
         >>> from tensordict import TensorDict
         >>> from torchrl.data import Bounded
         >>> from torchrl_causal.modules import make_gail_discriminator
+        >>> from torchrl_causal.objectives import AbsorbingIndicator
         >>> spec = Bounded(-1.0, 1.0, shape=(2,))
-        >>> loss = GAILDiscriminatorLoss(make_gail_discriminator(3, spec, hidden=8))
-        >>> make = lambda: TensorDict({"observation": torch.randn(6, 3), "action": spec.rand((6,))}, [6])
-        >>> batch = gail_discriminator_batch(loss, make(), make())
+        >>> loss = GAILDiscriminatorLoss(AbsorbingIndicator(make_gail_discriminator(3 + 1, spec, hidden=8)))
+        >>> rows = TensorDict({"observation": torch.randn(4, 3), "action": spec.rand((4,)),
+        ...                    "absorbing": torch.tensor([[False], [False], [False], [True]])}, [4])
+        >>> batch = gail_discriminator_batch(loss, rows, rows.clone())
         >>> sorted(batch.keys())
-        ['action', 'collector_action', 'collector_observation', 'observation']
+        ['absorbing', 'action', 'collector_absorbing', 'collector_action', 'collector_observation', 'observation']
     """
     if expert.batch_size != policy.batch_size:
         raise ValueError(
