@@ -11,18 +11,19 @@ from hydra.utils import instantiate
 from omegaconf import OmegaConf
 from omegaconf.errors import InterpolationResolutionError
 
-from torchrl_causal.trainers import TRAINERS, compose_config, run_label
+from torchrl_causal.trainers import CONFIG_DIR, TRAINERS, compose_config, run_label
 
 ENVS = ("rovermaze_u", "rovermaze_medium", "rovermaze_large", "route_choice",
         "antmaze_medium", "antmaze_large", "humanoidmaze_medium", "humanoidmaze_large")
-ALGOS = ("bc", "gail", "sqil", "iq_learn", "expert")
+ALGOS = ("bc", "gail", "sqil", "iq_learn", "iq_learn_garg", "expert")
 
 # Appendix E, tab:hparams, transcribed: (key in the algo config, value) per algorithm,
 # shared by both environment families.
 PAPER_SHARED = {
     "bc": {"actor.hidden": 256, "actor.blocks": 4, "actor.dropout": 0.0, "lr": 3e-4, "batch_size": 2048,
            "val_fraction": 0.2},
-    "gail": {"actor.hidden": 256, "actor.blocks": 3, "actor.dropout": 0.05, "lr_actor": 1e-4, "lr_critic": 3e-4,
+    "gail": {"actor.hidden": 256, "actor.blocks": 3, "actor.dropout": 0.0,  # 0.05 in the paper: see gail.yaml
+             "lr_actor": 1e-4, "lr_critic": 3e-4,
              "batch_size": 1024, "gamma": 0.99, "max_grad_norm": 0.5, "clip_epsilon": 0.2, "gae_lambda": 0.95,
              "entropy_coef": 1e-2, "critic_coef": 0.5, "normalize_advantage": True, "lr_discriminator": 3e-4,
              "discriminator.dropout": 0.2, "discriminator_updates": 2, "discriminator_batch_size": 1024,
@@ -102,7 +103,8 @@ def test_overrides_reach_env_window_and_run_dir() -> None:
 @pytest.mark.parametrize(
     ("experiment", "swept"),
     [
-        ("paper_table", {"algo": "expert,bc,gail,sqil,iq_learn", "causal": "true,false", "seed": "0,1,2"}),
+        ("paper_table", {"row": "expert,c_bc,c_gail,c_sqil,c_iq_learn,c_iq_learn_garg,bc,gail,sqil,iq_learn,sqil_wm",
+                         "seed": "0,1,2"}),
         ("window_ablation", {"window.k": "0,1,2,5,10,100", "causal": "true"}),
         ("horizon_ablation", {"env.horizon": "500,1000,1500", "env": "antmaze_medium,antmaze_large"}),
         ("strength_ablation", {"env.confounding_strength": "0.15,0.5,0.85,1.0"}),
@@ -118,6 +120,20 @@ def test_experiments_sweep_the_papers_grids(experiment: str, swept: dict[str, st
     params = {k: str(v) for k, v in cfg.hydra.sweeper.params.items()}
     for key, value in swept.items():
         assert params[key].replace(" ", "") == value
+
+
+ROWS = sorted(path.stem for path in (CONFIG_DIR / "row").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("row", ROWS)
+def test_each_table_row_is_the_run_it_names(row: str) -> None:
+    cfg = compose_config(["experiment=paper_table", f"row={row}", "env=rovermaze_medium"])
+    assert cfg.run_name.split("/")[-2] == row
+    assert cfg.algo.name == row.removeprefix("c_").removesuffix("_wm")
+    if row.endswith("iq_learn_garg"):
+        assert cfg.algo.variant == "iq_learn"
+    elif row.endswith("iq_learn"):
+        assert cfg.algo.variant == "paper"
 
 
 def test_entry_point_composes_from_any_directory(tmp_path) -> None:

@@ -148,13 +148,16 @@ def test_gail_value_network_is_a_three_layer_relu_mlp():
     assert v(obs_td())["state_value"].shape == (5, 1)
 
 
-def test_gail_discriminator_outputs_a_probability_under_gail_loss_key():
+def test_gail_discriminator_outputs_an_unbounded_logit_under_gail_loss_key():
     d = make_gail_discriminator(3, SPEC, hidden=16)
     assert d.module.input_layer[2].p == 0.2
+    assert isinstance(d.module.output_activation, nn.Identity)  # logits: no sigmoid
     td = obs_td()
     td["action"] = SPEC.rand((5,))
-    p = d(td)["d_logits"]
-    assert p.shape == (5, 1) and ((p > 0) & (p < 1)).all()
+    with torch.no_grad():
+        d.module.head.bias.fill_(-3.0)  # a logit a sigmoid output could never produce
+    logits = d(td)["d_logits"]
+    assert logits.shape == (5, 1) and (logits < 0).any()
 
 
 def test_action_spec_errors_name_the_problem():

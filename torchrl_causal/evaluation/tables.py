@@ -44,6 +44,7 @@ TABLE1_ALGORITHMS: tuple[str, ...] = (
 _DISPLAY = {
     "expert": "Expert", "c_bc": "C-BC", "c_gail": "C-GAIL", "c_sqil": "C-SQIL", "c_iq_learn": "C-IQ-Learn",
     "bc": "BC", "gail": "GAIL", "sqil": "SQIL", "iq_learn": "IQ-Learn",
+    "c_iq_learn_garg": "C-IQ-Learn (Garg et al.)", "iq_learn_garg": "IQ-Learn (Garg et al.)",
 }
 CSV_COLUMNS: tuple[str, ...] = (
     "algorithm", "regime", "success_rate", "success_se", "return_mean", "return_std",

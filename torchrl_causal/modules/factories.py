@@ -219,12 +219,14 @@ def make_gail_discriminator(
     action_key: NestedKey = "action",
     out_key: NestedKey = "d_logits",
 ) -> TensorDictModule:
-    """GAIL's discriminator: a skip-connected three-layer ReLU MLP with dropout, sigmoid output.
+    """GAIL's discriminator: a skip-connected three-layer ReLU MLP with dropout, logit output.
 
-    The output is the probability that ``(observation, action)`` comes from the expert.
-    It is written to ``"d_logits"`` because that is the key TorchRL's
-    :class:`~torchrl.objectives.GAILLoss` reads (it applies a BCE loss to probabilities,
-    despite the key's name).
+    The output is the logit of the probability that ``(observation, action)`` comes from
+    the expert, written to ``"d_logits"`` (the key TorchRL's
+    :class:`~torchrl.objectives.GAILLoss` reads). Logits, not probabilities: the loss is
+    binary cross-entropy with logits, the gradient penalty acts on the logit (a sigmoid
+    output cannot keep a unit gradient where it saturates), and the reward is built from
+    the logit without rounding ``D`` to 0 or 1.
 
     Examples:
         >>> import torch
@@ -236,7 +238,5 @@ def make_gail_discriminator(
         torch.Size([3, 1])
     """
     spec = bounded_action_spec(action_spec, action_key)
-    body = SkipMLP(
-        observation_dim + _action_dim(spec), 1, hidden=hidden, dropout=dropout, output_activation=nn.Sigmoid
-    )
+    body = SkipMLP(observation_dim + _action_dim(spec), 1, hidden=hidden, dropout=dropout)
     return TensorDictModule(body, in_keys=[observation_key, action_key], out_keys=[out_key])

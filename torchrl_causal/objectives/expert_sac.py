@@ -3,7 +3,9 @@
 Both algorithms keep SAC's actor update, twin critics, target critics and entropy
 tuning (the paper's Algorithms 2 and 3 differ only in the critic loss), so they subclass
 TorchRL's :class:`~torchrl.objectives.SACLoss` and read one extra key: a boolean
-``"expert"`` flag that marks expert transitions in a mixed replay batch.
+``"expert"`` flag that marks expert transitions in a mixed replay batch. With
+``absorbing=True`` they also read the absorbing-state flags of
+:mod:`torchrl_causal.objectives.absorbing`.
 """
 
 from __future__ import annotations
@@ -15,6 +17,9 @@ from tensordict import TensorDictBase
 from tensordict.nn import ProbabilisticTensorDictSequential, TensorDictModule
 from tensordict.utils import NestedKey
 from torchrl.objectives import SACLoss
+
+from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingIndicator
+from torchrl_causal.objectives.utils import eval_mode
 
 __all__ = ["ALPHA_CLAMP", "ExpertFlaggedSACLoss"]
 
@@ -31,6 +36,17 @@ class ExpertFlaggedSACLoss(SACLoss):
     which is applied in place to ``log_alpha`` every time alpha is read, so an
     optimizer step that leaves the range is undone before alpha is next used.
 
+    Targets are computed with the actor and the critics in eval mode: the next action
+    ``a'`` is drawn from the policy being learned, not from a copy thinned by a fresh
+    dropout mask (the actor loss keeps dropout as a regulariser).
+
+    With ``absorbing=True`` the critic is wrapped in
+    :class:`~torchrl_causal.objectives.absorbing.AbsorbingIndicator`, so it reads the
+    ``"absorbing"`` flag (``("next", "absorbing")`` for the bootstrap) as one more
+    input feature: build it for ``observation_dim + 1`` features. Batches then come from
+    :func:`~torchrl_causal.objectives.absorbing.add_absorbing_transitions`, and goal
+    termination no longer makes the episode's end worth zero.
+
     Args:
         actor_network (ProbabilisticTensorDictSequential): stochastic actor.
         qvalue_network (TensorDictModule): Q(observation, action) network, copied
@@ -42,6 +58,8 @@ class ExpertFlaggedSACLoss(SACLoss):
             Defaults to ``1.0`` (``log alpha = 0`` as in the paper's pseudocode).
         min_alpha (float, optional): lower clamp of alpha. Defaults to ``1e-3``.
         max_alpha (float, optional): upper clamp of alpha. Defaults to ``0.1``.
+        absorbing (bool, optional): read absorbing-state flags (see above).
+            Defaults to ``False``.
         **kwargs: forwarded to :class:`~torchrl.objectives.SACLoss`.
     """
 
@@ -68,10 +86,13 @@ class ExpertFlaggedSACLoss(SACLoss):
         alpha_init: float = 1.0,
         min_alpha: float = ALPHA_CLAMP[0],
         max_alpha: float = ALPHA_CLAMP[1],
+        absorbing: bool = False,
         **kwargs,
     ) -> None:
         if not 0.0 < min_alpha <= max_alpha:
             raise ValueError(f"need 0 < min_alpha <= max_alpha, got min_alpha={min_alpha}, max_alpha={max_alpha}.")
+        if absorbing:
+            qvalue_network = AbsorbingIndicator(qvalue_network)
         super().__init__(
             actor_network,
             qvalue_network,
@@ -83,10 +104,22 @@ class ExpertFlaggedSACLoss(SACLoss):
             **kwargs,
         )
 
+    @property
+    def absorbing(self) -> bool:
+        """Whether the critics read the absorbing-state flags."""
+        return isinstance(self.qvalue_network, AbsorbingIndicator)
+
     def _set_in_keys(self) -> None:
         super()._set_in_keys()
         reward = ("next", self.tensor_keys.reward)
-        self._in_keys = [key for key in self._in_keys if key != reward] + [self.tensor_keys.expert]
+        extra = [self.tensor_keys.expert]
+        if self.absorbing:
+            extra.append(("next", ABSORBING_KEY))
+        self._in_keys = [key for key in self._in_keys if key != reward] + extra
+
+    def _compute_target_v2(self, tensordict: TensorDictBase) -> torch.Tensor:
+        with eval_mode(self.actor_network, self.qvalue_network):
+            return super()._compute_target_v2(tensordict)
 
     def expert_flag(self, tensordict: TensorDictBase) -> torch.Tensor:
         """Returns the boolean expert flag of shape ``batch + (1,)``, with a clear error if it is malformed."""

@@ -13,7 +13,8 @@ __all__ = ["SQILLoss"]
 class SQILLoss(ExpertFlaggedSACLoss):
     r"""SQIL: SAC trained on rewards relabelled from the batch's expert flag.
 
-    Each transition gets ``r = 1`` if ``"expert"`` is ``True`` and ``r = 0`` otherwise,
+    Each transition gets ``r = expert_reward`` (1 by default) if ``"expert"`` is ``True``
+    and ``r = 0`` otherwise,
     written to ``("next", "reward")`` of a shallow copy of the batch (the caller's batch is
     untouched apart from SAC's priority key), then TorchRL's
     :class:`~torchrl.objectives.SACLoss` runs unchanged: the critics regress onto
@@ -28,6 +29,11 @@ class SQILLoss(ExpertFlaggedSACLoss):
     default). The critic loss is squared error summed over the twin critics
     (TorchRL's convention; the paper's ``1/2`` factor only rescales gradients).
 
+    With ``absorbing=True`` (see
+    :class:`~torchrl_causal.objectives.expert_sac.ExpertFlaggedSACLoss`) an absorbing
+    transition earns the reward of its episode's label, so reaching the goal is worth
+    the discounted value of the absorbing state instead of zero.
+
     Args:
         actor_network (ProbabilisticTensorDictSequential): stochastic actor, e.g.
             :func:`~torchrl_causal.modules.make_tanh_gaussian_actor`.
@@ -36,6 +42,10 @@ class SQILLoss(ExpertFlaggedSACLoss):
 
     Keyword Args:
         loss_function (str, optional): critic regression loss. Defaults to ``"l2"``.
+        expert_reward (float, optional): reward of an expert transition. Defaults to
+            ``1.0`` (SQIL); ``2.0`` with half-expert batches gives the critic gradient of
+            :class:`~torchrl_causal.objectives.IQLearnLoss` ``variant="paper"``, doubled.
+        absorbing (bool, optional): read absorbing-state flags. Defaults to ``False``.
         min_alpha, max_alpha (float, optional): alpha clamp, defaults ``1e-3`` and ``0.1``.
         **kwargs: see :class:`~torchrl_causal.objectives.expert_sac.ExpertFlaggedSACLoss`
             and :class:`~torchrl.objectives.SACLoss`.
@@ -78,8 +88,10 @@ class SQILLoss(ExpertFlaggedSACLoss):
         qvalue_network: TensorDictModule,
         *,
         loss_function: str = "l2",
+        expert_reward: float = 1.0,
         min_alpha: float = ALPHA_CLAMP[0],
         max_alpha: float = ALPHA_CLAMP[1],
+        absorbing: bool = False,
         **kwargs,
     ) -> None:
         super().__init__(
@@ -88,13 +100,15 @@ class SQILLoss(ExpertFlaggedSACLoss):
             loss_function=loss_function,
             min_alpha=min_alpha,
             max_alpha=max_alpha,
+            absorbing=absorbing,
             **kwargs,
         )
+        self.expert_reward = float(expert_reward)
 
     def relabel(self, tensordict: TensorDictBase) -> TensorDictBase:
-        """Returns a shallow copy of the batch with ``("next", reward)`` = 1 for expert, 0 for policy transitions."""
+        """Returns a shallow copy of the batch with ``("next", reward)`` = ``expert_reward`` for expert, 0 for policy transitions."""
         relabelled = tensordict.copy()
-        reward = self.expert_flag(tensordict).to(self.log_alpha.dtype)
+        reward = self.expert_flag(tensordict).to(self.log_alpha.dtype) * self.expert_reward
         relabelled.set(("next", self.tensor_keys.reward), reward)
         return relabelled
 

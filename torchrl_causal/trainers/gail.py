@@ -5,9 +5,16 @@ Each round a TorchRL :class:`~torchrl.collectors.Collector` steps ``episodes_per
 envs for ``horizon`` steps each (at least that many episodes; finished ones restart).
 The discriminator (TorchRL's ``GAILLoss`` with a gradient penalty) takes
 ``discriminator_updates`` steps on minibatches of expert and fresh policy transitions,
-its learning rate halving every ``discriminator_lr_step`` rounds (StepLR). The reward
-``-log(1 - D)`` feeds GAE, and ``ppo_epochs`` passes of clipped PPO over shuffled
-minibatches update the actor and value network, with gradient-norm clipping.
+its learning rate halving every ``discriminator_lr_step`` rounds (StepLR). The
+discriminator's reward (``algo.reward``: its logit by default) feeds GAE, and
+``ppo_epochs`` passes of clipped PPO over shuffled minibatches update the actor and
+value network, with gradient-norm clipping. With ``algo.absorbing`` expert and policy
+transitions get absorbing states for the discriminator, and terminal steps the
+absorbing state's discounted reward.
+
+The actor has no dropout (``algo.actor.dropout`` must be 0): PPO's ratio divides the
+loss's probability of an action by the one recorded when it was taken, and a mask
+redrawn at every forward pass makes that ratio noise even before any update.
 """
 
 from __future__ import annotations
@@ -23,9 +30,10 @@ from torchrl.collectors import Collector
 from torchrl.envs import EnvBase
 
 from torchrl_causal.modules import make_gail_discriminator, make_gail_value_network, make_tanh_gaussian_actor
-from torchrl_causal.objectives import gail_discriminator_batch, make_gail_losses
+from torchrl_causal.objectives import ABSORBING_KEY, add_absorbing_transitions, gail_discriminator_batch, make_gail_losses
 from torchrl_causal.trainers.base import Trainer
 from torchrl_causal.trainers.builders import (
+    TRANSITION_KEYS,
     expert_transitions,
     load_or_collect_demonstrations,
     make_imitator_env,
@@ -56,16 +64,21 @@ class GAILTrainer(Trainer):
 
     def setup(self) -> None:
         algo = self.cfg.algo
+        if float(algo.actor.dropout) != 0.0:
+            raise ValueError(f"algo.actor.dropout must be 0 for GAIL, got {algo.actor.dropout}: PPO's probability ratio "
+                             "needs the actor that collected the rollout, not a copy with a fresh dropout mask")
         self.env = make_imitator_env(self.cfg, self.window, "train", int(algo.episodes_per_round), int(self.cfg.seed))
         dim = observation_dim(self.env)
         self.losses = make_gail_losses(
             self.build_policy(self.cfg, self.env),
             make_gail_value_network(dim, hidden=int(algo.value.hidden)),
-            make_gail_discriminator(dim, self.env.action_spec, hidden=int(algo.discriminator.hidden),
+            make_gail_discriminator(dim + bool(algo.absorbing), self.env.action_spec,
+                                    hidden=int(algo.discriminator.hidden),
                                     dropout=float(algo.discriminator.dropout)),
             gamma=float(algo.gamma), gae_lambda=float(algo.gae_lambda), clip_epsilon=float(algo.clip_epsilon),
             entropy_coeff=float(algo.entropy_coef), critic_coeff=float(algo.critic_coef),
             gp_lambda=float(algo.gradient_penalty), normalize_advantage=bool(algo.normalize_advantage),
+            reward=str(algo.reward), absorbing=bool(algo.absorbing),
         )
         ppo = self.losses.policy
         self.policy_optimizer = torch.optim.Adam([
@@ -76,9 +89,15 @@ class GAILTrainer(Trainer):
                                                         lr=float(algo.lr_discriminator))
         self.discriminator_schedule = torch.optim.lr_scheduler.StepLR(
             self.discriminator_optimizer, step_size=int(algo.discriminator_lr_step), gamma=float(algo.discriminator_lr_gamma))
-        self.expert = expert_transitions(self.window, load_or_collect_demonstrations(self.cfg)).select("observation", "action")
+        self.expert = self._discriminator_rows(expert_transitions(self.window, load_or_collect_demonstrations(self.cfg)))
         self.generator = torch.Generator().manual_seed(int(self.cfg.seed))
         self.collector = None
+
+    def _discriminator_rows(self, transitions: TensorDictBase) -> TensorDictBase:
+        """What the discriminator sees of flat transitions (with their absorbing states, when enabled)."""
+        if bool(self.cfg.algo.absorbing):
+            return add_absorbing_transitions(transitions).select("observation", "action", ABSORBING_KEY)
+        return transitions.select("observation", "action")
 
     def _sample(self, data: TensorDictBase, size: int) -> TensorDictBase:
         return data[torch.randint(data.numel(), (min(size, data.numel()),), generator=self.generator)]
@@ -112,21 +131,25 @@ class GAILTrainer(Trainer):
                 loss.backward()
                 torch.nn.utils.clip_grad_norm_(params, float(algo.max_grad_norm))
                 self.policy_optimizer.step()
-                for key in ("loss_objective", "loss_critic", "loss_entropy"):
+                for key in ("loss_objective", "loss_critic", "loss_entropy", "clip_fraction"):
                     sums[key] = sums.get(key, 0.0) + out[key].item()
                 count += 1
         return {f"train/{k}": v / count for k, v in sums.items()}
 
-    def train_step(self) -> Mapping[str, float]:
-        algo = self.cfg.algo
+    def collect(self) -> TensorDictBase:
+        """One round's rollout, ``[episodes_per_round, horizon]`` with time last."""
         if self.collector is None:
             self.env.set_seed(int(self.cfg.seed) * 1_000_003 + self.progress)
-            frames = int(algo.episodes_per_round) * int(self.cfg.env.horizon)
+            frames = int(self.cfg.algo.episodes_per_round) * int(self.cfg.env.horizon)
             self.collector = iter(Collector(self.env, self.policy, frames_per_batch=frames, total_frames=-1, device="cpu",
                                             auto_register_policy_transforms=False))
-        rollout = next(self.collector)  # [episodes_per_round, horizon], time last
+        return next(self.collector)
+
+    def train_step(self) -> Mapping[str, float]:
+        rollout = self.collect()
+        policy_rows = self._discriminator_rows(rollout.reshape(-1).select(*TRANSITION_KEYS))
         scalars = {"train/env_reward_per_step": rollout["next", "reward"].mean().item(),
-                   "train/loss_discriminator": self._update_discriminator(rollout.reshape(-1))}
+                   "train/loss_discriminator": self._update_discriminator(policy_rows)}
         with torch.no_grad():
             rollout = self.losses.reward(rollout)
             rollout = self.losses.policy.value_estimator(rollout)

@@ -6,14 +6,23 @@ demonstrations, encoded by the same window, fill a static expert buffer with
 ``"expert"`` = True. Each gradient step draws half its batch from each buffer (the
 paper's expert buffer ratio 0.5), updates the twin critics (cosine-annealed learning
 rate), the actor and the entropy coefficient with gradient-norm clipping, then the
-target critics by Polyak averaging. The first ``random_steps`` env steps use uniformly
-random actions; afterwards ``utd_ratio`` gradient steps follow every env step.
+target critics by Polyak averaging.
+
+The counts are exact: the first ``random_steps`` env steps use uniformly random
+actions (a whole number of collector batches, or the config is refused); after ``n``
+further env steps ``floor(utd_ratio * n)`` gradient steps have run, interleaved with
+collection every ``frames_per_batch`` env steps (by default one step of every batched
+env); the cosine schedule of the critic learning rate spans exactly the run's number of
+gradient steps, so none runs at learning rate zero. The actor collects in eval mode
+(no dropout): the replay buffer holds the policy that is evaluated. With
+``algo.absorbing`` the expert and policy transitions get absorbing states
+(:func:`~torchrl_causal.objectives.add_absorbing_transitions`).
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
+from fractions import Fraction
 from typing import Any
 
 import torch
@@ -26,7 +35,7 @@ from torchrl.envs import EnvBase
 from torchrl.objectives import SoftUpdate
 
 from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
-from torchrl_causal.objectives import IQLearnLoss, SQILLoss
+from torchrl_causal.objectives import IQLearnLoss, SQILLoss, add_absorbing_transitions, eval_mode
 from torchrl_causal.trainers.base import Trainer
 from torchrl_causal.trainers.builders import (
     TRANSITION_KEYS,
@@ -66,14 +75,18 @@ class OffPolicyILTrainer(Trainer):
     def _make_loss(self, env: EnvBase) -> SQILLoss | IQLearnLoss:
         algo = self.cfg.algo
         actor = self.build_policy(self.cfg, env)
-        critic = make_qvalue_network(observation_dim(env), env.action_spec, hidden=int(algo.critic.hidden),
+        # With absorbing states the critic also reads the absorbing flag as one more feature.
+        critic = make_qvalue_network(observation_dim(env) + bool(algo.absorbing), env.action_spec,
+                                     hidden=int(algo.critic.hidden),
                                      num_blocks=int(algo.critic.blocks), dropout=float(algo.critic.dropout))
         kwargs: dict[str, Any] = dict(alpha_init=float(algo.alpha_init), min_alpha=float(algo.alpha_min),
-                                      max_alpha=float(algo.alpha_max), target_entropy=algo.target_entropy)
+                                      max_alpha=float(algo.alpha_max), target_entropy=algo.target_entropy,
+                                      absorbing=bool(algo.absorbing))
         if algo.loss == "sqil":
             loss = SQILLoss(actor, critic, **kwargs)
         elif algo.loss == "iq_learn":
-            loss = IQLearnLoss(actor, critic, num_value_samples=int(algo.value_samples), **kwargs)
+            loss = IQLearnLoss(actor, critic, variant=str(algo.variant), num_value_samples=int(algo.value_samples),
+                               **kwargs)
         else:
             raise ValueError(f"algo.loss must be 'sqil' or 'iq_learn', got {algo.loss!r}")
         loss.make_value_estimator(gamma=float(algo.gamma))
@@ -89,9 +102,13 @@ class OffPolicyILTrainer(Trainer):
         self.critic_optimizer = torch.optim.Adam(self.loss.qvalue_network_params.flatten_keys().values(),
                                                  lr=float(algo.lr_critic))
         self.alpha_optimizer = torch.optim.Adam([self.loss.log_alpha], lr=float(algo.lr_alpha))
-        self.total_updates = max(1, math.ceil(self.updates_per_step * max(0, self.total - int(algo.random_steps))))
+        if int(algo.random_steps) % int(algo.frames_per_batch):
+            raise ValueError(f"algo.random_steps={algo.random_steps} must be a multiple of algo.frames_per_batch="
+                             f"{algo.frames_per_batch}: random actions are drawn for whole collector batches")
+        self.total_updates = self.updates_due(self.total)
         if algo.critic_lr_schedule == "cosine":
-            self.critic_schedule = torch.optim.lr_scheduler.CosineAnnealingLR(self.critic_optimizer, self.total_updates)
+            self.critic_schedule = torch.optim.lr_scheduler.CosineAnnealingLR(self.critic_optimizer,
+                                                                              max(1, self.total_updates))
         elif algo.critic_lr_schedule in (None, "none", "constant"):
             self.critic_schedule = None
         else:
@@ -100,18 +117,21 @@ class OffPolicyILTrainer(Trainer):
         if half < 1 or not 0.0 < float(algo.expert_ratio) < 1.0:
             raise ValueError(f"need batch_size >= 2 and 0 < expert_ratio < 1, got {algo.batch_size}, {algo.expert_ratio}")
         expert_batch = round(int(algo.batch_size) * float(algo.expert_ratio))
-        demos = expert_transitions(self.window, load_or_collect_demonstrations(self.cfg))
+        demos = self._replay_format(expert_transitions(self.window, load_or_collect_demonstrations(self.cfg)))
         self.expert_buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(demos.numel()), batch_size=expert_batch)
         self.expert_buffer.extend(demos)
         self.policy_buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(int(algo.buffer_size)),
                                                     batch_size=int(algo.batch_size) - expert_batch)
         self.updates = 0
-        self.update_debt = 0.0  # fractional gradient steps owed by the UTD ratio
         self.collector = None
 
-    @property
-    def updates_per_step(self) -> float:
-        return float(self.cfg.algo.utd_ratio)
+    def updates_due(self, progress: int) -> int:
+        """Gradient steps owed after ``progress`` env steps: ``floor(utd_ratio * (progress - random_steps))``."""
+        utd = Fraction(float(self.cfg.algo.utd_ratio)).limit_denominator(1_000_000)  # exact for 0.25, 0.5, 0.1...
+        return max(0, int(utd * (progress - int(self.cfg.algo.random_steps))))
+
+    def _replay_format(self, transitions: TensorDict) -> TensorDict:
+        return add_absorbing_transitions(transitions) if bool(self.cfg.algo.absorbing) else transitions
 
     def _make_collector(self) -> Collector:
         algo = self.cfg.algo
@@ -121,26 +141,21 @@ class OffPolicyILTrainer(Trainer):
         self.env.set_seed(int(self.cfg.seed) * 1_000_003 + self.progress)
         return Collector(
             self.env, self.policy, frames_per_batch=frames, total_frames=-1,
-            init_random_frames=math.ceil(remaining_random / frames) * frames if remaining_random else None,
+            init_random_frames=remaining_random or None,
             device="cpu", auto_register_policy_transforms=False,
         )
 
     def train_step(self) -> Mapping[str, float]:
-        if self.collector is None:
-            self.collector = iter(self._make_collector())
-        batch = next(self.collector)
+        with eval_mode(self.policy):  # the collector also probes the policy when it is built
+            if self.collector is None:
+                self.collector = iter(self._make_collector())
+            batch = next(self.collector)
         transitions = batch.reshape(-1).select(*_COLLECTED_KEYS)
         transitions.set("expert", torch.zeros((*transitions.batch_size, 1), dtype=torch.bool))
-        self.policy_buffer.extend(transitions.exclude(("next", "reward")))
+        self.policy_buffer.extend(self._replay_format(transitions.exclude(("next", "reward"))))
         self.progress += transitions.numel()
         scalars: dict[str, float] = {"train/reward_per_step": transitions["next", "reward"].mean().item()}
-        if self.progress <= int(self.cfg.algo.random_steps):
-            return scalars
-        self.update_debt += self.updates_per_step * transitions.numel()
-        losses = []
-        while self.update_debt >= 1.0:
-            self.update_debt -= 1.0
-            losses.append(self._update())
+        losses = [self._update() for _ in range(self.updates_due(self.progress) - self.updates)]
         if losses:
             scalars.update({k: sum(d[k] for d in losses) / len(losses) for k in losses[0]})
         return scalars
@@ -182,7 +197,6 @@ class OffPolicyILTrainer(Trainer):
             "critic_schedule": self.critic_schedule.state_dict() if self.critic_schedule is not None else {},
             "policy_buffer": self.policy_buffer.state_dict(),
             "updates": self.updates,
-            "update_debt": self.update_debt,
         }
 
     def load_training_state(self, state: Mapping[str, Any]) -> None:
@@ -194,5 +208,4 @@ class OffPolicyILTrainer(Trainer):
             self.critic_schedule.load_state_dict(state["critic_schedule"])
         self.policy_buffer.load_state_dict(state["policy_buffer"])
         self.updates = int(state["updates"])
-        self.update_debt = float(state["update_debt"])
         self.collector = None

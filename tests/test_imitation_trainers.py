@@ -1,0 +1,107 @@
+"""What the imitation trainers promise beyond running: exact step counts, the policy
+that collects is the one evaluated, absorbing states reach the replay buffers, and
+PPO's ratio is one before an update."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+import torch
+from test_trainers import tiny_config
+
+from torchrl_causal.trainers import make_trainer
+
+pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
+
+# utd 0.3 is not a binary fraction: floor(0.3 * 48) = 14 updates, not 15 or 13.
+COUNTS = ["algo.utd_ratio=0.3", "algo.random_steps=12", "algo.total_steps=60", "algo.frames_per_batch=6",
+          "algo.num_envs=2", "algo.eval_every=1000"]
+
+
+def _record_actor_calls(trainer, calls: list) -> None:
+    """Records (batch rows, training mode) of every actor forward pass once the trainer has built it."""
+    setup = trainer.setup
+
+    def setup_and_hook():
+        setup()
+        trainer.policy.module[0].register_forward_pre_hook(  # the network: losses call it through get_dist
+            lambda module, args: calls.append((args[0].shape[0] if args[0].batch_dims else 1, module.training)))
+
+    trainer.setup = setup_and_hook
+
+
+def test_off_policy_counts_are_exact_and_the_cosine_schedule_ends_with_the_run(tmp_path: Path) -> None:
+    trainer = make_trainer(tiny_config(tmp_path, "rovermaze_u", "sqil", True, *COUNTS))
+    learning_rates, calls = [], []
+    update = trainer._update
+
+    def spy():
+        learning_rates.append(trainer.critic_optimizer.param_groups[0]["lr"])
+        return update()
+
+    trainer._update = spy
+    _record_actor_calls(trainer, calls)
+    trainer.fit()
+    assert trainer.updates == trainer.total_updates == 14 == len(learning_rates)
+    lr = float(trainer.cfg.algo.lr_critic)
+    expected = [lr * (1 + math.cos(math.pi * i / 14)) / 2 for i in range(14)]
+    assert learning_rates == pytest.approx(expected) and min(learning_rates) > 0
+    # The collector's env has 2 envs: the policy acts at the (60 - 12) / 2 vectorised steps
+    # after the random ones (plus once when the collector probes it), in eval mode (no
+    # dropout); the actor loss sees the training batch in train mode.
+    collection = [mode for rows, mode in calls if rows == 2]
+    assert len(collection) == (60 - 12) // 2 + 1 and not any(collection)
+    assert any(mode for rows, mode in calls if rows == int(trainer.cfg.algo.batch_size))
+
+
+def test_random_steps_must_be_whole_collector_batches(tmp_path: Path) -> None:
+    trainer = make_trainer(tiny_config(tmp_path, "rovermaze_u", "sqil", True, *COUNTS, "algo.random_steps=10"))
+    with pytest.raises(ValueError, match="algo.random_steps=10 must be a multiple of algo.frames_per_batch=6"):
+        trainer.fit()
+
+
+@pytest.mark.parametrize("algo", ["sqil", "iq_learn"])
+def test_absorbing_states_reach_both_replay_buffers(tmp_path: Path, algo: str) -> None:
+    # Every Route Choice episode ends after one terminal step: half of all rows are absorbing.
+    trainer = make_trainer(tiny_config(tmp_path, "route_choice", algo, True, "algo.absorbing=true"))
+    trainer.fit()
+    assert trainer.loss.absorbing
+    for buffer in (trainer.expert_buffer, trainer.policy_buffer):
+        rows = buffer[: len(buffer)]
+        assert int(rows["absorbing"].sum()) * 2 == len(buffer)
+        assert not rows["next", "terminated"].any() and rows["next", "absorbing"].all()
+    assert trainer.expert_buffer[:]["expert"].all() and not trainer.policy_buffer[:]["expert"].any()
+
+
+def test_gail_refuses_actor_dropout(tmp_path: Path) -> None:
+    trainer = make_trainer(tiny_config(tmp_path, "route_choice", "gail", True, "algo.actor.dropout=0.05"))
+    with pytest.raises(ValueError, match="algo.actor.dropout must be 0 for GAIL"):
+        trainer.fit()
+
+
+@pytest.mark.parametrize("absorbing", [False, True])
+def test_gail_ppo_ratio_is_one_before_the_first_update(tmp_path: Path, absorbing: bool) -> None:
+    trainer = make_trainer(tiny_config(tmp_path, "rovermaze_u", "gail", False, "algo.rounds=1",
+                                       f"algo.absorbing={str(absorbing).lower()}"))
+    ratios = {}
+    update = trainer._update_policy
+    discriminator_update = trainer._update_discriminator
+
+    def spy(rollout):
+        with torch.no_grad():
+            out = trainer.losses.policy(rollout)
+        ratios.update(max=out["max_ratio"].item(), mean=out["mean_ratio"].item(), clip=out["clip_fraction"].item())
+        return update(rollout)
+
+    def discriminator_spy(rows):
+        ratios["absorbing_key"] = "absorbing" in rows.keys()
+        return discriminator_update(rows)
+
+    trainer._update_policy = spy
+    trainer._update_discriminator = discriminator_spy
+    trainer.fit()
+    assert ratios["clip"] == 0.0
+    assert ratios["max"] == pytest.approx(1.0, abs=1e-5) and ratios["mean"] == pytest.approx(1.0, abs=1e-5)
+    assert ratios["absorbing_key"] == absorbing
