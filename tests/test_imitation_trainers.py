@@ -12,6 +12,7 @@ import torch
 from test_trainers import tiny_config
 
 from torchrl_causal.trainers import make_trainer
+from torchrl_causal.trainers.update import ActorCriticUpdate
 
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
 
@@ -32,19 +33,19 @@ def _record_actor_calls(trainer, calls: list) -> None:
     trainer.setup = setup_and_hook
 
 
-def test_off_policy_counts_are_exact_and_the_cosine_schedule_ends_with_the_run(tmp_path: Path) -> None:
+def test_off_policy_counts_are_exact_and_the_cosine_schedule_ends_with_the_run(tmp_path: Path, monkeypatch) -> None:
     trainer = make_trainer(tiny_config(tmp_path, "rovermaze_u", "sqil", True, *COUNTS))
     learning_rates, calls = [], []
-    update = trainer._update
+    step = ActorCriticUpdate.__call__
 
-    def spy():
-        learning_rates.append(trainer.critic_optimizer.param_groups[0]["lr"])
-        return update()
+    def spy(update, batch):
+        learning_rates.append(update.critic_optimizer.param_groups[0]["lr"])
+        return step(update, batch)
 
-    trainer._update = spy
+    monkeypatch.setattr(ActorCriticUpdate, "__call__", spy)
     _record_actor_calls(trainer, calls)
     trainer.fit()
-    assert trainer.updates == trainer.total_updates == 14 == len(learning_rates)
+    assert trainer.update.updates == trainer.update.cosine_updates == 14 == len(learning_rates)
     lr = float(trainer.cfg.algo.lr_critic)
     expected = [lr * (1 + math.cos(math.pi * i / 14)) / 2 for i in range(14)]
     assert learning_rates == pytest.approx(expected) and min(learning_rates) > 0

@@ -156,10 +156,10 @@ def test_off_policy_resume_restores_the_saved_state(tmp_path: Path) -> None:
     second.window = first.window
     second.setup()
     assert second._resume()
-    assert second.progress == 120 and second.updates == 10 and len(second.policy_buffer) == 120
+    assert second.progress == 120 and second.update.updates == 10 and len(second.policy_buffer) == 120
     for key, value in first.loss.state_dict().items():
         assert torch.equal(second.loss.state_dict()[key], value), key
-    assert second.critic_optimizer.param_groups[0]["lr"] == first.critic_optimizer.param_groups[0]["lr"] < 3e-4
+    assert second.update.critic_optimizer.param_groups[0]["lr"] == first.update.critic_optimizer.param_groups[0]["lr"] < 3e-4
     torch.testing.assert_close(second.policy_buffer[:120]["observation"], first.policy_buffer[:120]["observation"])
     results = OffPolicyILTrainer(tiny_config(tmp_path, "rovermaze_u", "sqil", True)).fit()
     assert json.loads((Path(cfg.run_dir) / "status.json").read_text())["progress"] == 240

@@ -88,7 +88,7 @@ def add_absorbing_transitions(
         raise KeyError(f"transitions need the terminal flag {terminated_key!r} to place absorbing states.")
     terminated = terminated.reshape(transitions.shape[0], -1).any(-1)
     out = transitions.clone()
-    out.set(absorbing_key, torch.zeros(*out.shape, 1, dtype=torch.bool))
+    out.set(absorbing_key, torch.zeros(*out.shape, 1, dtype=torch.bool, device=terminated.device))
     out.set(("next", absorbing_key), terminated.unsqueeze(-1).clone())
     absorbing = out[terminated].clone()
     if done_key in out.keys(True):
@@ -99,8 +99,8 @@ def add_absorbing_transitions(
     for key in zeroed_keys:
         if key in absorbing.keys(True):
             absorbing.get(key).zero_()
-    absorbing.set(absorbing_key, torch.ones(*absorbing.shape, 1, dtype=torch.bool))
-    absorbing.set(("next", absorbing_key), torch.ones(*absorbing.shape, 1, dtype=torch.bool))
+    absorbing.set(absorbing_key, torch.ones(*absorbing.shape, 1, dtype=torch.bool, device=terminated.device))
+    absorbing.set(("next", absorbing_key), torch.ones(*absorbing.shape, 1, dtype=torch.bool, device=terminated.device))
     absorbing.get(terminated_key).zero_()
     if done_key in absorbing.keys(True):
         absorbing.get(done_key).zero_()

@@ -186,11 +186,15 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
         """The chi-squared critic loss of :attr:`variant`; replaces SAC's soft Bellman regression in :meth:`forward`."""
         expert = self.expert_flag(tensordict).to(self.log_alpha.dtype)
         num_expert = expert.sum()
-        if not num_expert:
-            raise ValueError(
-                f"IQLearnLoss needs at least one expert transition per batch (flag {self.tensor_keys.expert!r}); "
-                "sample expert and policy transitions together (the paper uses half of each)."
-            )
+        message = (f"IQLearnLoss needs at least one expert transition per batch (flag {self.tensor_keys.expert!r}); "
+                   "sample expert and policy transitions together (the paper uses half of each).")
+        if expert.device.type == "cpu" and not torch.compiler.is_compiling():
+            if not num_expert:  # reading a CPU tensor costs nothing
+                raise ValueError(message)
+        else:
+            # On an accelerator, or inside a compiled graph, a host read would stall the
+            # update loop (or split the graph): the device checks the count itself.
+            torch._assert_async(num_expert > 0, message)
         weights = self._maybe_get_priority_weight(tensordict)
         discount = self.bootstrap_discount(tensordict)
         next_states = tensordict.get("next")

@@ -31,6 +31,7 @@ from torchrl_causal.evaluation.metrics import EvaluationResult, evaluate_policy
 from torchrl_causal.evaluation.runs import CONFIG_FILE, LOG_DIR, STATUS_FILE, WINDOW_FILE, TRAIN_CURVE, eval_path
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.trainers.builders import make_env, make_imitator_env, make_window, maze_geometry
+from torchrl_causal.trainers.device import CPU, PolicyOnDevice, resolve_device
 
 __all__ = ["Trainer", "CheckpointError", "atomic_save", "load_checkpoint", "read_status"]
 
@@ -62,10 +63,11 @@ def _atomic_write_text(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-def load_checkpoint(path: Path) -> dict[str, Any]:
-    """``torch.load(..., weights_only=True)`` with an error that names the file."""
+def load_checkpoint(path: Path, map_location: str | torch.device = CPU) -> dict[str, Any]:
+    """``torch.load(..., weights_only=True)`` onto ``map_location``, with an error that
+    names the file. A checkpoint written on a GPU loads on a machine without one."""
     try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
+        state = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as err:  # pickle, zip and unpickler errors all mean the same here
         raise CheckpointError(f"checkpoint {path} is corrupted or not a torchrl-causal checkpoint: {err}") from err
     if not isinstance(state, dict) or "progress" not in state:
@@ -106,6 +108,8 @@ class Trainer(ABC):
 
     def __init__(self, cfg: DictConfig) -> None:
         self.cfg = cfg
+        # Before anything is built or written: device=cuda on a machine without one fails here.
+        self.device = resolve_device(str(OmegaConf.select(cfg, "device", default="cpu")))
         self.run_dir = Path(cfg.run_dir)
         self.progress = 0
         self.best_return = -math.inf
@@ -128,8 +132,9 @@ class Trainer(ABC):
         """Builds everything training needs (called once, after seeding)."""
 
     @abstractmethod
-    def train_step(self) -> Mapping[str, float]:
-        """One iteration; advances :attr:`progress`; returns scalars to log."""
+    def train_step(self) -> Mapping[str, float | torch.Tensor]:
+        """One iteration; advances :attr:`progress`; returns scalars to log (floats or
+        0-dim tensors, which are read back from their device only when logged)."""
 
     @abstractmethod
     def training_state(self) -> dict[str, Any]:
@@ -170,12 +175,12 @@ class Trainer(ABC):
         """The acting network rebuilt from the config with ``checkpoints/best.pt`` loaded
         (for evaluating a finished run without its training state)."""
         env = self.make_eval_env("train", 1, 0)
-        policy = self.build_policy(self.cfg, env)
+        policy = self.build_policy(self.cfg, env).to(self.device)
         env.close()
         path = self.checkpoint_dir / BEST_CHECKPOINT
         if not path.is_file():
             raise CheckpointError(f"run {self.run_dir} has no {CHECKPOINT_DIR}/{BEST_CHECKPOINT} to evaluate")
-        policy.load_state_dict(load_checkpoint(path)["policy"])
+        policy.load_state_dict(load_checkpoint(path, self.device)["policy"])
         return policy
 
     def evaluate(self, regime: str, episodes: int, seed: int, *, trajectories: int = 0, progress: bool = False,
@@ -187,9 +192,10 @@ class Trainer(ABC):
         was_training = getattr(policy, "training", None)  # scripted experts are plain callables
         if was_training is not None:
             policy.eval()
+        acting = policy if self.device == CPU else PolicyOnDevice(policy, self.device)
         try:
             return evaluate_policy(
-                env, policy, episodes=episodes, max_steps=int(self.cfg.env.horizon), regime=regime,
+                env, acting, episodes=episodes, max_steps=int(self.cfg.env.horizon), regime=regime,
                 seeds=[int(self.cfg.seed)], position_key=OmegaConf.select(self.cfg, "env.position_key"),
                 trajectories=trajectories, progress=progress,
             )
@@ -218,7 +224,7 @@ class Trainer(ABC):
             return TensorboardLogger(exp_name=LOG_DIR, log_dir=str(self.run_dir))
         raise ValueError(f"logger.backend must be 'csv' or 'tensorboard', got {backend!r}")
 
-    def _log(self, scalars: Mapping[str, float], step: int) -> None:
+    def _log(self, scalars: Mapping[str, float | torch.Tensor], step: int) -> None:
         for name, value in scalars.items():
             self.logger.log_scalar(name, float(value), step=step)
 
@@ -246,7 +252,7 @@ class Trainer(ABC):
         self.best_progress = None if state["best_progress"] < 0 else int(state["best_progress"])
         self.last_evaluated = None if state["last_evaluated"] < 0 else int(state["last_evaluated"])
         self.stopped = bool(state["stopped"])
-        torch.set_rng_state(state["torch_rng"])
+        torch.set_rng_state(state["torch_rng"].cpu())  # map_location may have put it on the device
         self.load_training_state(state["training"])
 
     def save_checkpoint(self) -> None:
@@ -257,7 +263,7 @@ class Trainer(ABC):
         path = self.checkpoint_dir / LAST_CHECKPOINT
         if not (bool(self.cfg.resume) and path.is_file()):
             return False
-        self.load_state_dict(load_checkpoint(path))
+        self.load_state_dict(load_checkpoint(path, self.device))
         _truncate_scalar_logs(self.run_dir / LOG_DIR, self.progress)
         return True
 
@@ -277,7 +283,7 @@ class Trainer(ABC):
         """Evaluates the best checkpoint in both regimes and writes ``eval/<regime>.json``."""
         best = self.checkpoint_dir / BEST_CHECKPOINT
         if best.is_file():
-            self.policy.load_state_dict(load_checkpoint(best)["policy"])
+            self.policy.load_state_dict(load_checkpoint(best, self.device)["policy"])
         results = {}
         for offset, regime in enumerate(("train", "deploy")):
             result = self.evaluate(regime, int(self.cfg.eval.final_episodes),
@@ -317,6 +323,7 @@ class Trainer(ABC):
                 scalars = self.train_step()
                 bar.update(self.progress - before)
                 if scalars:
+                    scalars = {name: float(value) for name, value in scalars.items()}  # the one device read per log
                     self._log(scalars, self.progress)
                     bar.set_postfix({k.split("/")[-1]: f"{v:.3g}" for k, v in scalars.items()}, refresh=False)
                 every = int(self.cfg.algo.eval_every)

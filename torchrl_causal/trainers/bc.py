@@ -81,9 +81,9 @@ class BCTrainer(Trainer):
         data = expert_transitions(self.window, demos).select("observation", "action")
         self.generator = torch.Generator().manual_seed(int(self.cfg.seed))
         train, val = episode_split(demos["episode"], float(algo.val_fraction), self.generator)
-        self.train_data, self.val_data = data[train], data[val]
+        self.train_data, self.val_data = data[train].to(self.device), data[val].to(self.device)
         env = make_imitator_env(self.cfg, self.window, "train", 1, int(self.cfg.seed))
-        self.loss = HuberBCLoss(self.build_policy(self.cfg, env), delta=float(algo.huber_delta))
+        self.loss = HuberBCLoss(self.build_policy(self.cfg, env).to(self.device), delta=float(algo.huber_delta))
         env.close()
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=float(algo.lr))
         self.best_val_loss = math.inf
@@ -99,19 +99,19 @@ class BCTrainer(Trainer):
     def validation_loss(self) -> float:
         self.policy.eval()
         try:
-            total = sum(self.loss(batch)["loss_bc"].item() * batch.numel() for batch in self._batches(self.val_data, False))
+            total = sum(self.loss(batch)["loss_bc"].double() * batch.numel() for batch in self._batches(self.val_data, False))
         finally:
             self.policy.train()
-        return total / self.val_data.numel()
+        return total.item() / self.val_data.numel()  # one read per epoch: early stopping needs it
 
-    def train_step(self) -> Mapping[str, float]:
+    def train_step(self) -> Mapping[str, float | torch.Tensor]:
         losses = []
         for batch in self._batches(self.train_data, True):
             loss = self.loss(batch)["loss_bc"]
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             self.optimizer.step()
-            losses.append(loss.item())
+            losses.append(loss.detach())
         val = self.validation_loss()
         if val < self.best_val_loss:
             self.best_val_loss, self.epochs_without_improvement = val, 0
@@ -119,7 +119,7 @@ class BCTrainer(Trainer):
             self.epochs_without_improvement += 1
             self.stopped = self.epochs_without_improvement >= int(self.cfg.algo.patience)
         self.progress += 1
-        return {"train/loss_bc": sum(losses) / len(losses), "val/loss_bc": val}
+        return {"train/loss_bc": torch.stack(losses).mean(), "val/loss_bc": val}
 
     def checkpoint_due(self, before: int) -> bool:
         return True  # an epoch is a natural, cheap checkpoint: resume is then exact
@@ -136,6 +136,6 @@ class BCTrainer(Trainer):
     def load_training_state(self, state: Mapping[str, Any]) -> None:
         self.loss.load_state_dict(state["loss"])
         self.optimizer.load_state_dict(state["optimizer"])
-        self.generator.set_state(state["generator"])
+        self.generator.set_state(state["generator"].cpu())
         self.best_val_loss = float(state["best_val_loss"])
         self.epochs_without_improvement = int(state["epochs_without_improvement"])

@@ -32,6 +32,7 @@ from torchrl.envs import EnvBase
 from torchrl_causal.modules import make_gail_discriminator, make_gail_value_network, make_tanh_gaussian_actor
 from torchrl_causal.objectives import ABSORBING_KEY, add_absorbing_transitions, gail_discriminator_batch, make_gail_losses
 from torchrl_causal.trainers.base import Trainer
+from torchrl_causal.trainers.device import CPU
 from torchrl_causal.trainers.builders import (
     TRANSITION_KEYS,
     expert_transitions,
@@ -70,11 +71,11 @@ class GAILTrainer(Trainer):
         self.env = make_imitator_env(self.cfg, self.window, "train", int(algo.episodes_per_round), int(self.cfg.seed))
         dim = observation_dim(self.env)
         self.losses = make_gail_losses(
-            self.build_policy(self.cfg, self.env),
-            make_gail_value_network(dim, hidden=int(algo.value.hidden)),
+            self.build_policy(self.cfg, self.env).to(self.device),
+            make_gail_value_network(dim, hidden=int(algo.value.hidden)).to(self.device),
             make_gail_discriminator(dim + bool(algo.absorbing), self.env.action_spec,
                                     hidden=int(algo.discriminator.hidden),
-                                    dropout=float(algo.discriminator.dropout)),
+                                    dropout=float(algo.discriminator.dropout)).to(self.device),
             gamma=float(algo.gamma), gae_lambda=float(algo.gae_lambda), clip_epsilon=float(algo.clip_epsilon),
             entropy_coeff=float(algo.entropy_coef), critic_coeff=float(algo.critic_coef),
             gp_lambda=float(algo.gradient_penalty), normalize_advantage=bool(algo.normalize_advantage),
@@ -89,7 +90,8 @@ class GAILTrainer(Trainer):
                                                         lr=float(algo.lr_discriminator))
         self.discriminator_schedule = torch.optim.lr_scheduler.StepLR(
             self.discriminator_optimizer, step_size=int(algo.discriminator_lr_step), gamma=float(algo.discriminator_lr_gamma))
-        self.expert = self._discriminator_rows(expert_transitions(self.window, load_or_collect_demonstrations(self.cfg)))
+        self.expert = self._discriminator_rows(
+            expert_transitions(self.window, load_or_collect_demonstrations(self.cfg))).to(self.device)
         self.generator = torch.Generator().manual_seed(int(self.cfg.seed))
         self.collector = None
 
@@ -102,7 +104,7 @@ class GAILTrainer(Trainer):
     def _sample(self, data: TensorDictBase, size: int) -> TensorDictBase:
         return data[torch.randint(data.numel(), (min(size, data.numel()),), generator=self.generator)]
 
-    def _update_discriminator(self, rollout: TensorDictBase) -> float:
+    def _update_discriminator(self, rollout: TensorDictBase) -> torch.Tensor:
         algo = self.cfg.algo
         size = min(int(algo.discriminator_batch_size), rollout.numel(), self.expert.numel())
         losses = []
@@ -113,14 +115,14 @@ class GAILTrainer(Trainer):
             self.discriminator_optimizer.zero_grad(set_to_none=True)
             loss.backward()
             self.discriminator_optimizer.step()
-            losses.append(loss.item())
-        return sum(losses) / len(losses)
+            losses.append(loss.detach())
+        return torch.stack(losses).mean()
 
-    def _update_policy(self, rollout: TensorDictBase) -> dict[str, float]:
+    def _update_policy(self, rollout: TensorDictBase) -> dict[str, torch.Tensor]:
         algo = self.cfg.algo
         ppo = self.losses.policy
         params = [p for group in self.policy_optimizer.param_groups for p in group["params"]]
-        sums: dict[str, float] = {}
+        sums: dict[str, torch.Tensor] = {}
         count = 0
         for _ in range(int(algo.ppo_epochs)):
             order = torch.randperm(rollout.numel(), generator=self.generator)
@@ -132,7 +134,7 @@ class GAILTrainer(Trainer):
                 torch.nn.utils.clip_grad_norm_(params, float(algo.max_grad_norm))
                 self.policy_optimizer.step()
                 for key in ("loss_objective", "loss_critic", "loss_entropy", "clip_fraction"):
-                    sums[key] = sums.get(key, 0.0) + out[key].item()
+                    sums[key] = sums.get(key, 0.0) + out[key].detach()
                 count += 1
         return {f"train/{k}": v / count for k, v in sums.items()}
 
@@ -141,19 +143,20 @@ class GAILTrainer(Trainer):
         if self.collector is None:
             self.env.set_seed(int(self.cfg.seed) * 1_000_003 + self.progress)
             frames = int(self.cfg.algo.episodes_per_round) * int(self.cfg.env.horizon)
-            self.collector = iter(Collector(self.env, self.policy, frames_per_batch=frames, total_frames=-1, device="cpu",
+            self.collector = iter(Collector(self.env, self.policy, frames_per_batch=frames, total_frames=-1,
+                                            env_device=CPU, policy_device=self.device, storing_device=self.device,
                                             auto_register_policy_transforms=False))
         return next(self.collector)
 
-    def train_step(self) -> Mapping[str, float]:
+    def train_step(self) -> Mapping[str, torch.Tensor]:
         rollout = self.collect()
         policy_rows = self._discriminator_rows(rollout.reshape(-1).select(*TRANSITION_KEYS))
-        scalars = {"train/env_reward_per_step": rollout["next", "reward"].mean().item(),
+        scalars = {"train/env_reward_per_step": rollout["next", "reward"].mean(),
                    "train/loss_discriminator": self._update_discriminator(policy_rows)}
         with torch.no_grad():
             rollout = self.losses.reward(rollout)
             rollout = self.losses.policy.value_estimator(rollout)
-        scalars["train/discriminator_reward"] = rollout["next", "reward"].mean().item()
+        scalars["train/discriminator_reward"] = rollout["next", "reward"].mean()
         scalars.update(self._update_policy(rollout.reshape(-1)))
         self.discriminator_schedule.step()
         self.progress += 1
@@ -179,5 +182,5 @@ class GAILTrainer(Trainer):
         self.policy_optimizer.load_state_dict(state["policy_optimizer"])
         self.discriminator_optimizer.load_state_dict(state["discriminator_optimizer"])
         self.discriminator_schedule.load_state_dict(state["discriminator_schedule"])
-        self.generator.set_state(state["generator"])
+        self.generator.set_state(state["generator"].cpu())
         self.collector = None

@@ -17,26 +17,34 @@ gradient steps, so none runs at learning rate zero. The actor collects in eval m
 (no dropout): the replay buffer holds the policy that is evaluated. With
 ``algo.absorbing`` the expert and policy transitions get absorbing states
 (:func:`~torchrl_causal.objectives.add_absorbing_transitions`).
+
+Networks, losses, optimisers and both replay buffers live on ``cfg.device``; the envs
+step on the CPU and the collector moves observations to the policy and actions back.
+``collector_workers > 1`` steps the envs in that many processes (TorchRL's
+:class:`~torchrl.collectors.MultiSyncCollector`), for the MuJoCo mazes whose physics is
+the bottleneck. Loss scalars are averaged on the device and read back every
+``log_every`` updates, so the update loop never waits for the device.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from fractions import Fraction
+from functools import partial
 from typing import Any
 
 import torch
 from omegaconf import DictConfig
 from tensordict import TensorDict
 from tensordict.nn import TensorDictModuleBase
-from torchrl.collectors import Collector
+from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import EnvBase
-from torchrl.objectives import SoftUpdate
 
 from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
 from torchrl_causal.objectives import IQLearnLoss, SQILLoss, add_absorbing_transitions, eval_mode
 from torchrl_causal.trainers.base import Trainer
+from torchrl_causal.trainers.device import CPU
 from torchrl_causal.trainers.builders import (
     TRANSITION_KEYS,
     expert_transitions,
@@ -44,6 +52,7 @@ from torchrl_causal.trainers.builders import (
     make_imitator_env,
     observation_dim,
 )
+from torchrl_causal.trainers.update import ActorCriticUpdate
 
 __all__ = ["OffPolicyILTrainer"]
 
@@ -74,11 +83,12 @@ class OffPolicyILTrainer(Trainer):
 
     def _make_loss(self, env: EnvBase) -> SQILLoss | IQLearnLoss:
         algo = self.cfg.algo
-        actor = self.build_policy(self.cfg, env)
+        # Built on the device before the loss copies them (twin and target critics, alpha).
+        actor = self.build_policy(self.cfg, env).to(self.device)
         # With absorbing states the critic also reads the absorbing flag as one more feature.
         critic = make_qvalue_network(observation_dim(env) + bool(algo.absorbing), env.action_spec,
-                                     hidden=int(algo.critic.hidden),
-                                     num_blocks=int(algo.critic.blocks), dropout=float(algo.critic.dropout))
+                                     hidden=int(algo.critic.hidden), num_blocks=int(algo.critic.blocks),
+                                     dropout=float(algo.critic.dropout)).to(self.device)
         kwargs: dict[str, Any] = dict(alpha_init=float(algo.alpha_init), min_alpha=float(algo.alpha_min),
                                       max_alpha=float(algo.alpha_max), target_entropy=algo.target_entropy,
                                       absorbing=bool(algo.absorbing))
@@ -90,39 +100,40 @@ class OffPolicyILTrainer(Trainer):
         else:
             raise ValueError(f"algo.loss must be 'sqil' or 'iq_learn', got {algo.loss!r}")
         loss.make_value_estimator(gamma=float(algo.gamma))
-        return loss
+        return loss.to(self.device)
 
     def setup(self) -> None:
         algo = self.cfg.algo
-        self.env = make_imitator_env(self.cfg, self.window, "train", int(algo.num_envs), int(self.cfg.seed))
+        self.workers = int(self.cfg.collector_workers)
+        if self.workers < 1 or int(algo.num_envs) % self.workers:
+            raise ValueError(f"collector_workers must be >= 1 and divide algo.num_envs, got {self.workers} "
+                             f"workers for {algo.num_envs} envs")
+        self.env = make_imitator_env(self.cfg, self.window, "train", int(algo.num_envs) // self.workers,
+                                     int(self.cfg.seed))
         self.loss = self._make_loss(self.env)
-        self.target_updater = SoftUpdate(self.loss, tau=float(algo.tau))
-        self.actor_optimizer = torch.optim.Adam(self.loss.actor_network_params.flatten_keys().values(),
-                                                lr=float(algo.lr_actor))
-        self.critic_optimizer = torch.optim.Adam(self.loss.qvalue_network_params.flatten_keys().values(),
-                                                 lr=float(algo.lr_critic))
-        self.alpha_optimizer = torch.optim.Adam([self.loss.log_alpha], lr=float(algo.lr_alpha))
         if int(algo.random_steps) % int(algo.frames_per_batch):
             raise ValueError(f"algo.random_steps={algo.random_steps} must be a multiple of algo.frames_per_batch="
                              f"{algo.frames_per_batch}: random actions are drawn for whole collector batches")
-        self.total_updates = self.updates_due(self.total)
-        if algo.critic_lr_schedule == "cosine":
-            self.critic_schedule = torch.optim.lr_scheduler.CosineAnnealingLR(self.critic_optimizer,
-                                                                              max(1, self.total_updates))
-        elif algo.critic_lr_schedule in (None, "none", "constant"):
-            self.critic_schedule = None
-        else:
+        if algo.critic_lr_schedule not in ("cosine", None, "none", "constant"):
             raise ValueError(f"algo.critic_lr_schedule must be 'cosine' or 'none', got {algo.critic_lr_schedule!r}")
+        self.update = ActorCriticUpdate(
+            self.loss, lr_actor=float(algo.lr_actor), lr_critic=float(algo.lr_critic), lr_alpha=float(algo.lr_alpha),
+            max_grad_norm=float(algo.max_grad_norm), tau=float(algo.tau),
+            cosine_updates=max(1, self.updates_due(self.total)) if algo.critic_lr_schedule == "cosine" else None,
+            compile=bool(self.cfg.compile),
+        )
         half = int(algo.batch_size) // 2
         if half < 1 or not 0.0 < float(algo.expert_ratio) < 1.0:
             raise ValueError(f"need batch_size >= 2 and 0 < expert_ratio < 1, got {algo.batch_size}, {algo.expert_ratio}")
         expert_batch = round(int(algo.batch_size) * float(algo.expert_ratio))
         demos = self._replay_format(expert_transitions(self.window, load_or_collect_demonstrations(self.cfg)))
-        self.expert_buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(demos.numel()), batch_size=expert_batch)
+        self.expert_buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(demos.numel(), device=self.device),
+                                                    batch_size=expert_batch)
         self.expert_buffer.extend(demos)
-        self.policy_buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(int(algo.buffer_size)),
+        self.policy_buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(int(algo.buffer_size), device=self.device),
                                                     batch_size=int(algo.batch_size) - expert_batch)
-        self.updates = 0
+        self.log_every = int(self.cfg.log_every)
+        self._reset_scalar_sums()
         self.collector = None
 
     def updates_due(self, progress: int) -> int:
@@ -133,79 +144,77 @@ class OffPolicyILTrainer(Trainer):
     def _replay_format(self, transitions: TensorDict) -> TensorDict:
         return add_absorbing_transitions(transitions) if bool(self.cfg.algo.absorbing) else transitions
 
-    def _make_collector(self) -> Collector:
+    def _make_collector(self) -> Collector | MultiSyncCollector:
         algo = self.cfg.algo
         frames = int(algo.frames_per_batch)
         remaining_random = max(0, int(algo.random_steps) - self.progress)
+        devices = dict(env_device=CPU, policy_device=self.device, storing_device=self.device)
         # Resume restarts the episodes (env state is not checkpointed) with a fresh seed.
-        self.env.set_seed(int(self.cfg.seed) * 1_000_003 + self.progress)
-        return Collector(
-            self.env, self.policy, frames_per_batch=frames, total_frames=-1,
-            init_random_frames=remaining_random or None,
-            device="cpu", auto_register_policy_transforms=False,
-        )
+        seed = int(self.cfg.seed) * 1_000_003 + self.progress
+        if self.workers == 1:
+            self.env.set_seed(seed)
+            return Collector(self.env, self.policy, frames_per_batch=frames, total_frames=-1,
+                             init_random_frames=remaining_random or None, auto_register_policy_transforms=False,
+                             **devices)
+        make_worker_env = partial(make_imitator_env, self.cfg, self.window, "train",
+                                  int(algo.num_envs) // self.workers, seed)
+        # Every worker counts its own random frames, so each takes its share of them.
+        collector = MultiSyncCollector([make_worker_env] * self.workers, self.policy, frames_per_batch=frames,
+                                       total_frames=-1, init_random_frames=remaining_random // self.workers or None,
+                                       cat_results="stack", auto_register_policy_transforms=False, **devices)
+        collector.set_seed(seed)
+        return collector
 
-    def train_step(self) -> Mapping[str, float]:
+    def _reset_scalar_sums(self) -> None:
+        # Sums stay on the device; only the counts, which the host knows, are Python ints.
+        self.scalar_sums = torch.zeros(1 + len(ActorCriticUpdate.SCALARS), device=self.device)
+        self.batches_since_log = self.updates_since_log = 0
+
+    def _scalar_means(self) -> dict[str, torch.Tensor]:
+        """The averages since the last log, still on the device (the logger reads them)."""
+        means = {"train/reward_per_step": self.scalar_sums[0] / self.batches_since_log}
+        if self.updates_since_log:
+            losses = self.scalar_sums[1:] / self.updates_since_log
+            means.update({f"train/{name}": value for name, value in zip(ActorCriticUpdate.SCALARS, losses)})
+        self._reset_scalar_sums()
+        return means
+
+    def train_step(self) -> Mapping[str, torch.Tensor]:
         with eval_mode(self.policy):  # the collector also probes the policy when it is built
             if self.collector is None:
-                self.collector = iter(self._make_collector())
-            batch = next(self.collector)
+                self.collector = self._make_collector()
+                self.batches = iter(self.collector)
+            elif self.workers > 1:
+                self.collector.update_policy_weights_()
+            batch = next(self.batches)
         transitions = batch.reshape(-1).select(*_COLLECTED_KEYS)
-        transitions.set("expert", torch.zeros((*transitions.batch_size, 1), dtype=torch.bool))
+        transitions.set("expert", torch.zeros((*transitions.batch_size, 1), dtype=torch.bool, device=transitions.device))
         self.policy_buffer.extend(self._replay_format(transitions.exclude(("next", "reward"))))
         self.progress += transitions.numel()
-        scalars: dict[str, float] = {"train/reward_per_step": transitions["next", "reward"].mean().item()}
-        losses = [self._update() for _ in range(self.updates_due(self.progress) - self.updates)]
-        if losses:
-            scalars.update({k: sum(d[k] for d in losses) / len(losses) for k in losses[0]})
-        return scalars
-
-    @property
-    def optimizers(self) -> tuple[torch.optim.Optimizer, ...]:
-        return self.critic_optimizer, self.actor_optimizer, self.alpha_optimizer
-
-    def _update(self) -> dict[str, float]:
-        batch = torch.cat([self.expert_buffer.sample(), self.policy_buffer.sample()], dim=0)
-        out = self.loss(batch)
-        for optimizer in self.optimizers:
-            optimizer.zero_grad(set_to_none=True)
-        # SACLoss detaches the critics inside the actor loss, so one backward pass gives
-        # each network the gradient of its own objective.
-        (out["loss_qvalue"] + out["loss_actor"] + out["loss_alpha"]).backward()
-        max_norm = float(self.cfg.algo.max_grad_norm)
-        for params in (self.loss.qvalue_network_params, self.loss.actor_network_params):
-            torch.nn.utils.clip_grad_norm_(list(params.flatten_keys().values()), max_norm)
-        for optimizer in self.optimizers:
-            optimizer.step()
-        if self.critic_schedule is not None and self.updates < self.total_updates:
-            self.critic_schedule.step()
-        self.target_updater.step()
-        self.updates += 1
-        return {"train/loss_qvalue": out["loss_qvalue"].item(), "train/loss_actor": out["loss_actor"].item(),
-                "train/alpha": out["alpha"].item(), "train/entropy": out["entropy"].item()}
+        self.scalar_sums[0] += transitions["next", "reward"].mean()
+        self.batches_since_log += 1
+        for _ in range(self.updates_due(self.progress) - self.update.updates):
+            batch = torch.cat([self.expert_buffer.sample(), self.policy_buffer.sample()], dim=0)
+            self.scalar_sums[1:] += self.update(batch)
+            self.updates_since_log += 1
+        due = self.updates_since_log >= self.log_every or self.update.updates == 0 or self.progress >= self.total
+        return self._scalar_means() if due else {}
 
     def close(self) -> None:
+        if self.workers > 1 and self.collector is not None:
+            self.collector.shutdown()
         self.collector = None
         self.env.close()
 
     def training_state(self) -> dict[str, Any]:
         return {
             "loss": self.loss.state_dict(),
-            "actor_optimizer": self.actor_optimizer.state_dict(),
-            "critic_optimizer": self.critic_optimizer.state_dict(),
-            "alpha_optimizer": self.alpha_optimizer.state_dict(),
-            "critic_schedule": self.critic_schedule.state_dict() if self.critic_schedule is not None else {},
+            **self.update.state_dict(),
             "policy_buffer": self.policy_buffer.state_dict(),
-            "updates": self.updates,
         }
 
     def load_training_state(self, state: Mapping[str, Any]) -> None:
         self.loss.load_state_dict(state["loss"])
-        self.actor_optimizer.load_state_dict(state["actor_optimizer"])
-        self.critic_optimizer.load_state_dict(state["critic_optimizer"])
-        self.alpha_optimizer.load_state_dict(state["alpha_optimizer"])
-        if self.critic_schedule is not None:
-            self.critic_schedule.load_state_dict(state["critic_schedule"])
+        self.update.load_state_dict(state)
         self.policy_buffer.load_state_dict(state["policy_buffer"])
-        self.updates = int(state["updates"])
         self.collector = None

@@ -1,0 +1,296 @@
+"""Device plumbing: ``device=`` resolution and its refusal before anything is written,
+placement of every parameter, optimiser state and sampled batch, on-device loss averaging
+with a log every N updates, the compiled update, and multi-process collection.
+
+The placement tests run on every device this machine has: the CPU always (the CI
+machine has no GPU), CUDA when present.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Bounded
+
+from test_trainers import tiny_config
+from torchrl_causal.evaluation.runs import read_scalar_csv
+from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
+from torchrl_causal.objectives import IQLearnLoss
+from torchrl_causal.trainers import OffPolicyILTrainer, Trainer, make_trainer
+from torchrl_causal.trainers.builders import make_env, make_window
+from torchrl_causal.trainers.device import resolve_device
+from torchrl_causal.trainers.update import ActorCriticUpdate
+
+DEVICES = ["cpu", *(["cuda"] if torch.cuda.is_available() else [])]
+REPO = Path(__file__).resolve().parents[1]
+
+
+def set_up(trainer: Trainer) -> Trainer:
+    """What :meth:`Trainer.fit` does before its loop, without writing run files."""
+    trainer.window = make_window(trainer.cfg, make_env(trainer.cfg, "train", 1, int(trainer.cfg.seed)))
+    trainer.setup()
+    return trainer
+
+
+def assert_on(device: torch.device, tensors: dict[str, torch.Tensor]) -> None:
+    misplaced = {name: str(t.device) for name, t in tensors.items() if t.device != device}
+    assert not misplaced, f"not on {device}: {misplaced}"
+
+
+def module_tensors(module: torch.nn.Module) -> dict[str, torch.Tensor]:
+    return {**dict(module.named_parameters()), **dict(module.named_buffers())}
+
+
+def optimizer_tensors(optimizer: torch.optim.Optimizer) -> dict[str, torch.Tensor]:
+    # Adam's "step" counter lives on the CPU unless the step is fused or capturable.
+    return {f"{i}.{key}": value for i, state in enumerate(optimizer.state.values())
+            for key, value in state.items() if key != "step" and isinstance(value, torch.Tensor)}
+
+
+def batch_tensors(batch: TensorDictBase) -> dict[str, torch.Tensor]:
+    return {str(key): value for key, value in batch.items(True, True)}
+
+
+# ---------------------------------------------------------------------------- resolution
+
+
+def test_resolve_device_names_and_auto() -> None:
+    assert resolve_device("cpu") == torch.device("cpu")
+    assert resolve_device(torch.device("cpu")) == torch.device("cpu")
+    expected = torch.device("cuda", 0) if torch.cuda.is_available() else torch.device("cpu")
+    assert resolve_device("auto") == resolve_device(" Auto ") == expected
+    if torch.cuda.is_available():
+        assert resolve_device("cuda") == torch.device("cuda", torch.cuda.current_device())
+
+
+@pytest.mark.parametrize("name", ["gpu", "cuda:x", "", "cpu:0:1"])
+def test_resolve_device_refuses_what_is_not_a_device(name: str) -> None:
+    with pytest.raises(ValueError, match=f"device={name!r} is not a device name"):
+        resolve_device(name)
+
+
+def test_resolve_device_refuses_devices_this_machine_lacks() -> None:
+    with pytest.raises(ValueError, match=r"device='cuda:999' cannot be used here"):
+        resolve_device("cuda:999")
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match=r"device='cuda' cannot be used here: torch.cuda.is_available\(\) is False"):
+            resolve_device("cuda")
+    if not torch.backends.mps.is_available():
+        with pytest.raises(ValueError, match=r"device='mps' cannot be used here"):
+            resolve_device("mps")
+    with pytest.raises(ValueError, match="only cpu, cuda, cuda:N, mps and auto"):
+        resolve_device("meta")
+
+
+def test_trainer_refuses_a_missing_device_before_writing(tmp_path: Path) -> None:
+    cfg = tiny_config(tmp_path, "route_choice", "bc", True, "device=cuda:999")
+    with pytest.raises(ValueError, match="device='cuda:999'"):
+        make_trainer(cfg).fit()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_refuses_a_missing_device_before_hydra_makes_the_run_directory(tmp_path: Path) -> None:
+    env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    root = tmp_path / "runs"
+    for mode in ([], ["-m", "seed=0,1"]):
+        done = subprocess.run(
+            [sys.executable, "-m", "torchrl_causal.train", *mode, "env=route_choice", "algo=bc", "device=cuda:999",
+             f"run_root={root}"], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=240)
+        assert done.returncode != 0
+        assert "device='cuda:999' cannot be used here" in done.stderr, done.stderr[-2000:]
+        assert not root.exists(), sorted(str(p) for p in root.rglob("*"))
+
+
+# ---------------------------------------------------------------------------- placement
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_off_policy_placement_of_every_parameter_and_sampled_batch(tmp_path: Path, device: str) -> None:
+    cfg = tiny_config(tmp_path, "rovermaze_u", "iq_learn", True, f"device={device}")
+    trainer = set_up(OffPolicyILTrainer(cfg))
+    target = resolve_device(device)
+    assert trainer.device == target
+    while trainer.update.updates == 0:  # through the random phase into the first updates
+        trainer.train_step()
+    assert_on(target, module_tensors(trainer.loss))  # actor, twin critics, targets, alpha
+    assert_on(target, module_tensors(trainer.policy))
+    for optimizer in trainer.update.optimizers:
+        assert optimizer.state, "no optimiser state after an update"
+        assert_on(target, optimizer_tensors(optimizer))
+    assert_on(target, batch_tensors(trainer.expert_buffer.sample()))
+    assert_on(target, batch_tensors(trainer.policy_buffer.sample()))
+    assert_on(target, batch_tensors(next(trainer.batches)))  # the collector stores on the device
+    assert trainer.evaluate("train", 2, 0).n_episodes == 2  # the evaluation env steps on the CPU
+
+    # A checkpoint loads onto the device, the replay buffer's storage included.
+    state = trainer.state_dict()
+    trainer.close()
+    resumed = set_up(OffPolicyILTrainer(cfg))
+    resumed.load_state_dict(state)
+    assert resumed.update.updates == trainer.update.updates
+    assert_on(target, module_tensors(resumed.loss))
+    for optimizer in resumed.update.optimizers:
+        assert_on(target, optimizer_tensors(optimizer))
+    assert_on(target, batch_tensors(resumed.policy_buffer.sample()))
+    resumed.close()
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_bc_and_gail_placement(tmp_path: Path, device: str) -> None:
+    target = resolve_device(device)
+    bc = set_up(make_trainer(tiny_config(tmp_path, "rovermaze_u", "bc", True, f"device={device}")))
+    bc.train_step()
+    assert_on(target, module_tensors(bc.loss))
+    assert_on(target, optimizer_tensors(bc.optimizer))
+    assert_on(target, {**batch_tensors(bc.train_data), **batch_tensors(bc.val_data)})
+    gail = set_up(make_trainer(tiny_config(tmp_path, "rovermaze_u", "gail", True, f"device={device}")))
+    gail.train_step()
+    assert_on(target, {**module_tensors(gail.losses.policy), **module_tensors(gail.losses.discriminator)})
+    assert_on(target, {**optimizer_tensors(gail.policy_optimizer), **optimizer_tensors(gail.discriminator_optimizer)})
+    assert_on(target, batch_tensors(gail.expert))
+    gail.close()
+
+
+# ---------------------------------------------------------------------------- no syncs, logging
+
+
+_READS = ("item", "tolist", "__bool__", "__float__", "__int__", "__index__")
+
+
+def test_update_loop_reads_nothing_back_from_tensors(tmp_path: Path, monkeypatch) -> None:
+    """Between logs, the trainer's own code converts no tensor to a Python value (on a
+    GPU each such read would wait for the device)."""
+    trainer = set_up(OffPolicyILTrainer(tiny_config(tmp_path, "rovermaze_u", "sqil", True, "log_every=1000")))
+    while trainer.progress < int(trainer.cfg.algo.random_steps):
+        trainer.train_step()
+    trainers_dir = str(REPO / "torchrl_causal" / "trainers")
+    reads: list[str] = []
+    for name in _READS:
+        original = getattr(torch.Tensor, name)
+
+        def counting(self, *args, _name=name, _original=original, **kwargs):
+            caller = sys._getframe(1).f_code
+            if caller.co_filename.startswith(trainers_dir):
+                reads.append(f"{_name} in {caller.co_name} ({Path(caller.co_filename).name})")
+            return _original(self, *args, **kwargs)
+
+        monkeypatch.setattr(torch.Tensor, name, counting)
+    before = trainer.update.updates
+    scalars = trainer.train_step()
+    monkeypatch.undo()
+    assert trainer.update.updates - before == 10 and scalars == {}
+    assert reads == []
+    trainer.close()
+
+
+def test_losses_are_averaged_on_device_and_logged_every_n_updates(tmp_path: Path, monkeypatch) -> None:
+    recorded: list[torch.Tensor] = []
+    step = ActorCriticUpdate.__call__
+
+    def recording(self, batch):
+        scalars = step(self, batch)
+        recorded.append(scalars.clone())
+        return scalars
+
+    monkeypatch.setattr(ActorCriticUpdate, "__call__", recording)
+    # 80 random steps, then 10 updates per 40-step collector batch up to 240 steps.
+    cfg = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "log_every=15")
+    OffPolicyILTrainer(cfg).fit()
+    scalars = Path(cfg.run_dir) / "logs" / "scalars" / "train"
+    assert len(recorded) == 40
+    # 20 updates by step 160 (>= 15: logged), 10 more by 200 (not), 20 by 240 (logged, the end).
+    windows = {160: torch.stack(recorded[:20]).mean(0), 240: torch.stack(recorded[20:]).mean(0)}
+    for index, name in enumerate(ActorCriticUpdate.SCALARS):
+        logged = read_scalar_csv(scalars / f"{name}.csv")
+        assert [s for s, _ in logged] == [160, 240], name
+        for s, value in logged:
+            assert value == pytest.approx(windows[s][index].item(), rel=1e-5, abs=1e-6), (name, s)
+    # The collection scalar is logged through the random phase too.
+    assert [s for s, _ in read_scalar_csv(scalars / "reward_per_step.csv")] == [40, 80, 160, 240]
+
+
+# ---------------------------------------------------------------------------- torch.compile
+
+
+def _compile_unavailable() -> str | None:
+    if not torch._dynamo.is_dynamo_supported():
+        return f"torch.compile is not supported on Python {sys.version.split()[0]} with torch {torch.__version__}"
+    if not (os.environ.get("CXX") or shutil.which("g++") or shutil.which("c++") or shutil.which("clang++")):
+        return "torch.compile's CPU backend (inductor) needs a C++ compiler and none is on PATH"
+    return None
+
+
+def _iq_learn_update(compile: bool) -> ActorCriticUpdate:
+    torch.manual_seed(0)
+    spec = Bounded(-1.0, 1.0, shape=(2,))
+    loss = IQLearnLoss(make_tanh_gaussian_actor(3, spec, hidden=16, num_blocks=1, dropout=0.05),
+                       make_qvalue_network(3, spec, hidden=16, num_blocks=1), num_value_samples=2)
+    loss.make_value_estimator(gamma=0.99)
+    return ActorCriticUpdate(loss, lr_actor=1e-2, lr_critic=1e-2, lr_alpha=1e-2, max_grad_norm=1.0, tau=0.1,
+                             cosine_updates=5, compile=compile)
+
+
+def _batches(count: int) -> list[TensorDict]:
+    generator = torch.Generator().manual_seed(1)
+    return [TensorDict({
+        "observation": torch.randn(8, 3, generator=generator),
+        "action": torch.rand(8, 2, generator=generator) * 2 - 1,
+        "expert": (torch.arange(8) < 4).unsqueeze(-1),
+        "next": {"observation": torch.randn(8, 3, generator=generator),
+                 "done": torch.zeros(8, 1, dtype=torch.bool), "terminated": torch.zeros(8, 1, dtype=torch.bool)},
+    }, [8]) for _ in range(count)]
+
+
+@pytest.mark.skipif(_compile_unavailable() is not None, reason=str(_compile_unavailable()))
+def test_compiled_update_matches_eager() -> None:
+    """Same seed, same batches: compiled and eager updates give the same losses and weights.
+
+    IQ-Learn is the loss compiled here: its graph holds SAC's actor and temperature
+    losses and the K-sample soft value (one compilation costs ~30 s of CPU, so one loss).
+    Dropout (0.05) and the action samples draw from the RNG, so this also checks that
+    the compiled step keeps eager's random stream.
+    """
+    results = {}
+    for compile in (False, True):
+        update = _iq_learn_update(compile)
+        torch.manual_seed(2)
+        scalars = torch.stack([update(batch) for batch in _batches(3)])
+        results[compile] = scalars, {k: v.detach().clone() for k, v in update.loss.state_dict().items()}
+    torch.testing.assert_close(results[True][0], results[False][0], rtol=1e-5, atol=1e-5)
+    for key, value in results[False][1].items():
+        torch.testing.assert_close(results[True][1][key], value, rtol=1e-5, atol=1e-5, msg=key)
+    assert not torch.equal(results[False][1]["log_alpha"], torch.zeros(()))  # the updates did move things
+
+
+# ---------------------------------------------------------------------------- collection
+
+
+def test_multi_process_collection_uses_the_current_policy(tmp_path: Path) -> None:
+    """Two env processes (MultiSyncCollector): each batch holds both workers' envs, the
+    random phase is split between them, and after the main process changes the actor the
+    workers act with the new weights."""
+    cfg = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "collector_workers=2", "algo.random_steps=40",
+                      "algo.total_steps=120")
+    trainer = set_up(OffPolicyILTrainer(cfg))
+    trainer.train_step()  # the random phase: one 40-step batch, 20 steps from each worker's env
+    assert trainer.progress == 40 and len(trainer.policy_buffer) == 40
+    first, second = trainer.policy_buffer[:20], trainer.policy_buffer[20:40]
+    assert not torch.equal(first["observation"], second["observation"])  # two differently seeded envs
+    # A near-deterministic actor: zero weights, pre-tanh mean 0.5 from the head's bias, log-std -20.
+    with torch.no_grad():
+        for name, param in trainer.policy.named_parameters():
+            param.fill_(-20.0 if name.endswith("scale") else 0.5 if name.endswith("head.bias") else 0.0)
+    trainer.train_step()
+    trainer.close()
+    actions = trainer.policy_buffer[40:80]["action"]
+    low, high = trainer.env.action_spec.space.low, trainer.env.action_spec.space.high
+    expected = (low + (high - low) * (torch.tanh(torch.tensor(0.5)) + 1) / 2).expand_as(actions)
+    torch.testing.assert_close(actions, expected, atol=1e-4, rtol=0)
+    assert not torch.allclose(trainer.policy_buffer[:40]["action"], expected[:40], atol=1e-2)  # random phase

@@ -1,0 +1,125 @@
+"""Where training runs: ``cfg.device`` resolved once, and checked before anything is written.
+
+Networks, losses, optimisers and sampled replay batches live on the resolved device;
+envs always step on the CPU. TorchRL's collectors move observations to the policy and
+actions back (``env_device`` / ``policy_device`` / ``storing_device``);
+:class:`PolicyOnDevice` does the same for the evaluation loop.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from hydra.experimental.callback import Callback
+from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+
+__all__ = ["DeviceCheck", "PolicyOnDevice", "resolve_device"]
+
+CPU = torch.device("cpu")
+
+
+def _available(device: torch.device) -> str | None:
+    """Why ``device`` cannot be used on this machine, or ``None`` if it can."""
+    if device.type == "cuda":
+        if not torch.cuda.is_available():
+            build = "a CPU-only build" if torch.version.cuda is None else f"built for CUDA {torch.version.cuda}"
+            return f"torch.cuda.is_available() is False (torch {torch.__version__}, {build}; no GPU is visible)"
+        if device.index is not None and device.index >= torch.cuda.device_count():
+            return f"this machine has {torch.cuda.device_count()} CUDA device(s), so index {device.index} does not exist"
+    elif device.type == "mps" and not torch.backends.mps.is_available():
+        return "torch.backends.mps.is_available() is False"
+    elif device.type not in ("cpu", "cuda", "mps"):
+        return "only cpu, cuda, cuda:N, mps and auto are supported"
+    return None
+
+
+def resolve_device(spec: str | torch.device) -> torch.device:
+    """The device named by ``device=``: ``cpu``, ``cuda``, ``cuda:N``, ``mps`` or ``auto``.
+
+    ``auto`` is the first CUDA device when one is visible, else the CPU.
+
+    Raises:
+        ValueError: naming the value, if it is not a device name or the device is not
+            available on this machine (``device=cuda`` without a GPU).
+
+    Examples:
+        >>> resolve_device("cpu")
+        device(type='cpu')
+        >>> resolve_device("auto") == (torch.device("cuda", 0) if torch.cuda.is_available() else torch.device("cpu"))
+        True
+        >>> resolve_device("gpu")
+        Traceback (most recent call last):
+        ...
+        ValueError: device='gpu' is not a device name: use cpu, cuda, cuda:N, mps or auto
+    """
+    if isinstance(spec, str) and spec.strip().lower() == "auto":
+        return torch.device("cuda", 0) if torch.cuda.is_available() else CPU
+    try:
+        device = torch.device(spec)
+    except (RuntimeError, TypeError) as err:
+        raise ValueError(f"device={spec!r} is not a device name: use cpu, cuda, cuda:N, mps or auto") from err
+    problem = _available(device)
+    if problem is not None:
+        raise ValueError(f"device={spec!r} cannot be used here: {problem}. Use device=cpu, or device=auto to take "
+                         "a GPU only when one is present.")
+    if device.type == "cuda" and device.index is None:
+        device = torch.device("cuda", torch.cuda.current_device())
+    return device
+
+
+class DeviceCheck(Callback):
+    """Hydra callback: refuses an unavailable ``cfg.device`` before Hydra makes the run directory.
+
+    Hydra creates a job's output folder (the run directory) before it calls the task
+    function, so ``device=`` is checked here, at ``on_run_start``, and the process exits
+    with the error (Hydra turns a callback's exceptions into warnings, not into a stop).
+    A multirun is checked at ``on_multirun_start`` too, unless its launcher sends the
+    jobs to other machines (SLURM): a login node without a GPU may submit
+    ``device=cuda`` jobs, which each check their own node when the trainer starts.
+    """
+
+    @staticmethod
+    def _check(config: DictConfig) -> None:
+        try:
+            resolve_device(str(config.device))
+        except ValueError as err:
+            raise SystemExit(f"Error: {err}") from err
+
+    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
+        self._check(config)
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        launcher = str(OmegaConf.select(config, "hydra.launcher._target_", default=""))
+        if "slurm" not in launcher.lower():
+            self._check(config)
+
+
+class PolicyOnDevice(TensorDictModuleBase):
+    """Runs a policy that lives on ``device`` in an env that steps on the CPU.
+
+    The policy's inputs are moved to ``device`` and its outputs back to the CPU. Collectors do this themselves (``policy_device``); this is for loops that
+    call the policy directly, such as the evaluation loop.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> from tensordict.nn import TensorDictModule
+        >>> policy = TensorDictModule(torch.nn.Linear(3, 2), in_keys=["observation"], out_keys=["action"])
+        >>> td = PolicyOnDevice(policy, "cpu")(TensorDict({"observation": torch.ones(4, 3)}, [4]))
+        >>> td["action"].shape, td.device
+        (torch.Size([4, 2]), None)
+    """
+
+    def __init__(self, policy: TensorDictModuleBase, device: str | torch.device) -> None:
+        super().__init__()
+        self.policy = policy
+        self.device = torch.device(device)
+        self.in_keys = list(policy.in_keys)
+        self.out_keys = list(policy.out_keys)
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        inputs = tensordict.select(*self.in_keys, strict=False).to(self.device)
+        outputs = self.policy(inputs).select(*self.out_keys, strict=False)
+        return tensordict.update(outputs.to(CPU))
