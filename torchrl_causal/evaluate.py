@@ -6,7 +6,9 @@ Rebuilds the run's policy from its saved config and adjustment window, loads
 the length of successful episodes, and writes ``<run_dir>/eval/<regime>.json`` (the
 record the report reads) unless ``save=false``. ``confounding_strength=<s>`` evaluates
 under another deployment shift; such records go to ``eval/<regime>-cs<s>.json`` and the
-report ignores them.
+report ignores them. ``device=<cpu|cuda|...>`` picks where the policy runs; by default the
+run's own device when this machine has it, else the CPU (a run trained on a GPU evaluates
+anywhere).
 """
 
 from __future__ import annotations
@@ -23,15 +25,16 @@ from torchrl_causal.evaluation.runs import CONFIG_FILE, EVAL_DIR, WINDOW_FILE
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.trainers import make_trainer
 from torchrl_causal.trainers.builders import make_env, maze_geometry
+from torchrl_causal.trainers.device import resolve_device
 
 __all__ = ["evaluate_run", "main"]
 
-_ARGS = {"run_dir", "regime", "episodes", "num_envs", "seed", "confounding_strength", "save", "trajectories"}
+_ARGS = {"run_dir", "regime", "episodes", "num_envs", "seed", "confounding_strength", "save", "trajectories", "device"}
 
 
 def evaluate_run(run_dir: str | Path, regime: str = "deploy", episodes: int = 1000, *, num_envs: int | None = None,
                  seed: int = 30_000, confounding_strength: float | None = None, trajectories: int = 0,
-                 save: bool = True) -> EvaluationResult:
+                 save: bool = True, device: str | None = None) -> EvaluationResult:
     """Evaluates the best checkpoint of ``run_dir`` (see the module docstring)."""
     run_dir = Path(run_dir)
     config_file = run_dir / CONFIG_FILE
@@ -42,6 +45,13 @@ def evaluate_run(run_dir: str | Path, regime: str = "deploy", episodes: int = 10
         cfg.eval.num_envs = int(num_envs)
     if confounding_strength is not None:
         cfg.env.confounding_strength = float(confounding_strength)
+    if device is not None:
+        cfg.device = str(device)
+    else:
+        try:
+            resolve_device(str(OmegaConf.select(cfg, "device", default="cpu")))
+        except ValueError:
+            cfg.device = "cpu"
     trainer = make_trainer(cfg)
     policy = None  # the expert is rebuilt for every env it evaluates in
     if trainer.uses_window:
@@ -63,7 +73,7 @@ def main(argv: Sequence[str] | None = None) -> EvaluationResult:
     unknown = set(args) - _ARGS
     if unknown or "run_dir" not in args:
         raise SystemExit(f"usage: python -m torchrl_causal.evaluate run_dir=<dir> [regime=deploy] [episodes=1000] "
-                         f"[num_envs=...] [seed=...] [confounding_strength=...] [save=true]"
+                         f"[num_envs=...] [seed=...] [confounding_strength=...] [save=true] [device=...]"
                          + (f"; unknown argument(s) {sorted(unknown)}" if unknown else ""))
     result = evaluate_run(**{k: args[k] for k in args})
     s = result.summary()
