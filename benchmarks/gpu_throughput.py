@@ -112,11 +112,11 @@ def syncs_per_update(update: ActorCriticUpdate, batch: TensorDict, count: int = 
     return sum("synchronizing" in str(w.message) for w in caught) / count
 
 
-def update_rates(device: torch.device, compile: bool, rounds: int, per_round: int, warmup: int,
+def update_rates(device: torch.device, losses: list[str], compile: bool, rounds: int, per_round: int, warmup: int,
                  clock: str) -> dict[str, dict[str, float]]:
     generator = torch.Generator().manual_seed(0)
     batches = [make_batch(device, generator) for _ in range(per_round)]
-    variants = [(name, False) for name in LOSSES] + ([(name, True) for name in LOSSES] if compile else [])
+    variants = [(name, False) for name in losses] + ([(name, True) for name in losses] if compile else [])
     updates = {}
     for name, compiled in variants:
         label = f"{name}{' compiled' if compiled else ''}"
@@ -205,6 +205,8 @@ def main() -> None:
                         help="devices to measure; one this machine lacks is reported as unmeasured")
     parser.add_argument("--compile-on", nargs="*", default=[], metavar="DEVICE",
                         help="devices on which each loss is also timed with compile=True")
+    parser.add_argument("--losses", nargs="+", choices=list(LOSSES), default=list(LOSSES),
+                        help=f"losses to time ({BASELINE!r}, the baseline, is always timed)")
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--updates", type=int, default=5, help="timed updates per variant per round (CPU)")
     parser.add_argument("--cuda-updates", type=int, default=200, help="timed updates per variant per round (CUDA)")
@@ -227,7 +229,8 @@ def main() -> None:
         except ValueError as err:
             print(f"- {name}: unmeasured ({err})")
     if args.part in ("updates", "both"):
-        results = {name: update_rates(device, name in args.compile_on, args.rounds,
+        losses = [BASELINE, *(name for name in args.losses if name != BASELINE)]
+        results = {name: update_rates(device, losses, name in args.compile_on, args.rounds,
                                       args.cuda_updates if device.type == "cuda" else args.updates, args.warmup,
                                       args.clock)
                    for name, device in devices.items()}
