@@ -3,7 +3,6 @@ hand-derived graphs, slow reference implementations and networkx."""
 
 from __future__ import annotations
 
-import doctest
 import itertools
 import json
 import subprocess
@@ -16,11 +15,6 @@ from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 
 from torchrl_causal.envs.templates import ANTMAZE_TEMPLATE, HUMANOIDMAZE_TEMPLATE
-from torchrl_causal.graphs import adjustment as adjustment_module
-from torchrl_causal.graphs import criteria as criteria_module
-from torchrl_causal.graphs import diagram as diagram_module
-from torchrl_causal.graphs import template as template_module
-from torchrl_causal.graphs import window as window_module
 from torchrl_causal.graphs import (
     REWARD,
     AdjustmentWindow,
@@ -789,12 +783,6 @@ def test_bounded_influence_is_linear_in_the_unrolled_size():
     influence = check_bounded_influence(template)
     assert time.process_time() - start < 2.0
     assert influence.horizon >= 80 and not influence.bounded
-
-
-def test_graph_docstring_examples_run():
-    for module in (diagram_module, criteria_module, adjustment_module, template_module, window_module):
-        result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
-        assert result.attempted and not result.failed, module.__name__
 
 
 def test_maze_templates_import_without_mujoco_or_torch():
