@@ -208,13 +208,14 @@ class AntLocomotionEnv(EnvBase):
         angle = 2 * math.pi * torch.rand(count, generator=self.rng)
         return torch.stack((angle.cos(), angle.sin()), dim=-1)
 
-    def _observe(self) -> TensorDict:
-        qpos = torch.from_numpy(self.simulation.qpos()).float()
+    def _observe(self, qpos: np.ndarray) -> TensorDict:
+        """The observation for ``qpos`` (read once per step by the caller) and the current directions."""
+        position = torch.from_numpy(qpos).float()
         qvel = torch.from_numpy(self.simulation.qvel()).float()
         return TensorDict(
-            observation=locomotion_observation(qpos[:, 2:], qvel, self._direction),
+            observation=locomotion_observation(position[:, 2:], qvel, self._direction),
             direction=self._direction.clone(),
-            xy=qpos[:, :2],
+            xy=position[:, :2],
             batch_size=self.batch_size,
         )
 
@@ -235,10 +236,10 @@ class AntLocomotionEnv(EnvBase):
             self._direction[indices] = self._draw_directions(count) if given is None else given[indices].float()
             self._gust[indices] = self.gust_process.draw((count,), generator=self.rng)
             self._steps[indices] = 0
-        return self._observe()
+        return self._observe(self.simulation.qpos())
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
-        before = torch.from_numpy(self.simulation.qpos()[:, :2]).float()
+        before = tensordict.get("xy")
         ctrl = tensordict.get("action").detach().clamp(-1.0, 1.0).numpy()
         self.simulation.step(ctrl, self._gust.numpy())
         qpos = self.simulation.qpos()
@@ -252,7 +253,7 @@ class AntLocomotionEnv(EnvBase):
         if redraw.any():
             self._direction[redraw] = self._draw_directions(int(redraw.sum()))
         self._gust = self.gust_process.advance(self._gust, self._steps, generator=self.rng)
-        out = self._observe()
+        out = self._observe(qpos)
         out.update({"reward": reward, "terminated": terminated, "truncated": truncated,
                     "done": terminated | truncated})
         return out
