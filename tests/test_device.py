@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 import torch
 from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModule
 from torchrl.data import Bounded
 
 from test_trainers import tiny_config
@@ -28,7 +29,7 @@ from torchrl_causal.trainers import OffPolicyILTrainer, Trainer, make_trainer
 from torchrl_causal.trainers.builders import make_env, make_window
 from torchrl_causal.trainers import device as device_module
 from torchrl_causal.trainers import update as update_module
-from torchrl_causal.trainers.device import resolve_device
+from torchrl_causal.trainers.device import PolicyOnDevice, for_cpu_env, resolve_device
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
 DEVICES = ["cpu", *(["cuda"] if torch.cuda.is_available() else [])]
@@ -165,6 +166,20 @@ def test_bc_and_gail_placement(tmp_path: Path, device: str) -> None:
     assert_on(target, {**optimizer_tensors(gail.policy_optimizer), **optimizer_tensors(gail.discriminator_optimizer)})
     assert_on(target, batch_tensors(gail.expert))
     gail.close()
+
+
+def test_evaluation_moves_only_policies_that_live_off_the_cpu() -> None:
+    on_cpu = TensorDictModule(torch.nn.Linear(3, 2), in_keys=["observation"], out_keys=["action"])
+    assert for_cpu_env(on_cpu) is on_cpu
+    scripted = TensorDictModule(torch.nn.Identity(), in_keys=["observation"], out_keys=["action"])  # no parameters
+    assert for_cpu_env(scripted) is scripted
+    off_cpu = TensorDictModule(torch.nn.Linear(3, 2, device="meta"), in_keys=["observation"], out_keys=["action"])
+    wrapped = for_cpu_env(off_cpu)
+    assert isinstance(wrapped, PolicyOnDevice) and wrapped.device == torch.device("meta")
+    td = TensorDict({"observation": torch.ones(4, 3), "other": torch.zeros(4)}, [4])
+    out = PolicyOnDevice(on_cpu, "cpu")(td.clone())
+    torch.testing.assert_close(out["action"], on_cpu(td.clone())["action"])
+    assert "other" in out.keys()
 
 
 # ---------------------------------------------------------------------------- no syncs, logging
