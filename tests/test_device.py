@@ -8,7 +8,6 @@ machine has no GPU), CUDA when present.
 
 from __future__ import annotations
 
-import doctest
 import os
 import shutil
 import subprocess
@@ -27,8 +26,6 @@ from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
 from torchrl_causal.objectives import IQLearnLoss
 from torchrl_causal.trainers import OffPolicyILTrainer, Trainer, make_trainer
 from torchrl_causal.trainers.builders import make_env, make_window
-from torchrl_causal.trainers import device as device_module
-from torchrl_causal.trainers import update as update_module
 from torchrl_causal.trainers.device import PolicyOnDevice, for_cpu_env, resolve_device
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
@@ -63,12 +60,6 @@ def batch_tensors(batch: TensorDictBase) -> dict[str, torch.Tensor]:
 
 
 # ---------------------------------------------------------------------------- resolution
-
-
-@pytest.mark.parametrize("module", [device_module, update_module])
-def test_docstring_examples_run(module) -> None:
-    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
-    assert result.attempted > 0 and result.failed == 0
 
 
 def test_resolve_device_names_and_auto() -> None:
