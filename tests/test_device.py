@@ -8,7 +8,6 @@ machine has no GPU), CUDA when present.
 
 from __future__ import annotations
 
-import doctest
 import os
 import shutil
 import subprocess
@@ -18,6 +17,7 @@ from pathlib import Path
 import pytest
 import torch
 from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModule
 from torchrl.data import Bounded
 
 from test_trainers import tiny_config
@@ -26,9 +26,7 @@ from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
 from torchrl_causal.objectives import IQLearnLoss
 from torchrl_causal.trainers import OffPolicyILTrainer, Trainer, make_trainer
 from torchrl_causal.trainers.builders import make_env, make_window
-from torchrl_causal.trainers import device as device_module
-from torchrl_causal.trainers import update as update_module
-from torchrl_causal.trainers.device import resolve_device
+from torchrl_causal.trainers.device import PolicyOnDevice, for_cpu_env, resolve_device
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
 DEVICES = ["cpu", *(["cuda"] if torch.cuda.is_available() else [])]
@@ -62,12 +60,6 @@ def batch_tensors(batch: TensorDictBase) -> dict[str, torch.Tensor]:
 
 
 # ---------------------------------------------------------------------------- resolution
-
-
-@pytest.mark.parametrize("module", [device_module, update_module])
-def test_docstring_examples_run(module) -> None:
-    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
-    assert result.attempted > 0 and result.failed == 0
 
 
 def test_resolve_device_names_and_auto() -> None:
@@ -165,6 +157,20 @@ def test_bc_and_gail_placement(tmp_path: Path, device: str) -> None:
     assert_on(target, {**optimizer_tensors(gail.policy_optimizer), **optimizer_tensors(gail.discriminator_optimizer)})
     assert_on(target, batch_tensors(gail.expert))
     gail.close()
+
+
+def test_evaluation_moves_only_policies_that_live_off_the_cpu() -> None:
+    on_cpu = TensorDictModule(torch.nn.Linear(3, 2), in_keys=["observation"], out_keys=["action"])
+    assert for_cpu_env(on_cpu) is on_cpu
+    scripted = TensorDictModule(torch.nn.Identity(), in_keys=["observation"], out_keys=["action"])  # no parameters
+    assert for_cpu_env(scripted) is scripted
+    off_cpu = TensorDictModule(torch.nn.Linear(3, 2, device="meta"), in_keys=["observation"], out_keys=["action"])
+    wrapped = for_cpu_env(off_cpu)
+    assert isinstance(wrapped, PolicyOnDevice) and wrapped.device == torch.device("meta")
+    td = TensorDict({"observation": torch.ones(4, 3), "other": torch.zeros(4)}, [4])
+    out = PolicyOnDevice(on_cpu, "cpu")(td.clone())
+    torch.testing.assert_close(out["action"], on_cpu(td.clone())["action"])
+    assert "other" in out.keys()
 
 
 # ---------------------------------------------------------------------------- no syncs, logging

@@ -31,7 +31,7 @@ from torchrl_causal.evaluation.metrics import EvaluationResult, evaluate_policy
 from torchrl_causal.evaluation.runs import CONFIG_FILE, LOG_DIR, STATUS_FILE, WINDOW_FILE, TRAIN_CURVE, eval_path
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.trainers.builders import make_env, make_imitator_env, make_window, maze_geometry
-from torchrl_causal.trainers.device import CPU, PolicyOnDevice, resolve_device
+from torchrl_causal.trainers.device import CPU, for_cpu_env, resolve_device
 
 __all__ = ["Trainer", "CheckpointError", "atomic_save", "load_checkpoint", "read_status"]
 
@@ -192,7 +192,7 @@ class Trainer(ABC):
         was_training = getattr(policy, "training", None)  # scripted experts are plain callables
         if was_training is not None:
             policy.eval()
-        acting = policy if self.device == CPU else PolicyOnDevice(policy, self.device)
+        acting = for_cpu_env(policy)
         try:
             return evaluate_policy(
                 env, acting, episodes=episodes, max_steps=int(self.cfg.env.horizon), regime=regime,

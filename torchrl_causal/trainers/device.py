@@ -8,6 +8,7 @@ actions back (``env_device`` / ``policy_device`` / ``storing_device``);
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import torch
@@ -16,7 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-__all__ = ["DeviceCheck", "PolicyOnDevice", "resolve_device"]
+__all__ = ["DeviceCheck", "PolicyOnDevice", "for_cpu_env", "resolve_device"]
 
 CPU = torch.device("cpu")
 
@@ -123,3 +124,19 @@ class PolicyOnDevice(TensorDictModuleBase):
         inputs = tensordict.select(*self.in_keys, strict=False).to(self.device)
         outputs = self.policy(inputs).select(*self.out_keys, strict=False)
         return tensordict.update(outputs.to(CPU))
+
+
+def for_cpu_env(policy: Callable[[TensorDictBase], TensorDictBase]) -> Callable[[TensorDictBase], TensorDictBase]:
+    """``policy`` wrapped in :class:`PolicyOnDevice` when its parameters live off the CPU;
+    unchanged otherwise (CPU networks, scripted experts without parameters).
+
+    Examples:
+        >>> from tensordict.nn import TensorDictModule
+        >>> policy = TensorDictModule(torch.nn.Linear(3, 2), in_keys=["observation"], out_keys=["action"])
+        >>> for_cpu_env(policy) is policy
+        True
+    """
+    parameter = next(policy.parameters(), None) if isinstance(policy, torch.nn.Module) else None
+    if parameter is None or parameter.device == CPU:
+        return policy
+    return PolicyOnDevice(policy, parameter.device)
