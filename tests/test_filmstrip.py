@@ -1,0 +1,50 @@
+"""Frame strips of single episodes: the frames are the env's own renders at the steps
+they are labelled with, and the strip ends where the episode ends."""
+
+from __future__ import annotations
+
+import matplotlib.image
+import numpy as np
+import pytest
+
+from torchrl_causal.envs import AntMazeEnv, AntMazeExpert, RoverMazeEnv
+from torchrl_causal.evaluation.filmstrip import record_filmstrip, save_filmstrips
+
+SIZE = 48
+
+
+def _episode(seed: int, max_steps: int, **kwargs):
+    env = AntMazeEnv(maze="medium", regime="deploy", batch_size=[1], seed=seed)
+    return env, record_filmstrip(env, AntMazeExpert(env), max_steps=max_steps, width=SIZE, height=SIZE, **kwargs)
+
+
+def test_first_frame_is_the_render_after_the_seeded_reset():
+    _, strip = _episode(seed=3, max_steps=20, frames=3, every=5)
+    fresh = AntMazeEnv(maze="medium", regime="deploy", batch_size=[1], seed=3)
+    fresh.reset()
+    np.testing.assert_array_equal(strip.frames[0], fresh.render(width=SIZE, height=SIZE)[0])
+    assert strip.steps == (0, 10, 20) and strip.length == 20 and not strip.success
+    assert not np.array_equal(strip.frames[0], strip.frames[-1])  # the ant moved
+
+
+def test_a_successful_episode_ends_the_strip_at_the_goal():
+    _, strip = _episode(seed=0, max_steps=1000, frames=4, every=100)
+    assert strip.success and strip.length < 1000
+    assert strip.steps[0] == 0 and strip.steps[-1] == strip.length
+    assert list(strip.steps) == sorted(set(strip.steps))
+
+
+def test_strips_are_saved_one_row_each(tmp_path):
+    _, strip = _episode(seed=1, max_steps=10, frames=2, every=5)
+    path = save_filmstrips({"Expert": strip, "Expert again": strip}, tmp_path / "strip.png")
+    height, width, _ = matplotlib.image.imread(path).shape
+    assert height > width / 2  # two rows of two frames
+
+
+def test_refuses_batches_and_envs_that_cannot_render():
+    env = AntMazeEnv(maze="medium", batch_size=[2], seed=0)
+    with pytest.raises(ValueError, match="batch size"):
+        record_filmstrip(env, AntMazeExpert(env), max_steps=5)
+    rover = RoverMazeEnv(batch_size=[1], seed=0)
+    with pytest.raises(TypeError, match="cannot render"):
+        record_filmstrip(rover, lambda td: td, max_steps=5)
