@@ -1,7 +1,7 @@
 """GAIL (Causal GAIL with a causal window): rounds of on-policy episodes, discriminator
 updates, then PPO epochs on the discriminator's reward (Appendix E's protocol).
 
-Each round a TorchRL :class:`~torchrl.collectors.Collector` steps ``episodes_per_round``
+Each round a TorchRL collector steps ``episodes_per_round``
 envs for ``horizon`` steps each (at least that many episodes; finished ones restart).
 The discriminator (TorchRL's ``GAILLoss`` with a gradient penalty) takes
 ``discriminator_updates`` steps on minibatches of expert and fresh policy transitions,
@@ -16,21 +16,20 @@ from collections.abc import Mapping
 from typing import Any
 
 import torch
-from omegaconf import DictConfig
+from hydra.utils import instantiate
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
-from torchrl.collectors import Collector
-from torchrl.envs import EnvBase
 
-from torchrl_causal.modules import make_gail_discriminator, make_gail_value_network, make_tanh_gaussian_actor
-from torchrl_causal.objectives import gail_discriminator_batch, make_gail_losses
+from torchrl_causal.objectives import gail_discriminator_batch
 from torchrl_causal.trainers.base import Trainer
 from torchrl_causal.trainers.builders import (
     expert_transitions,
     load_or_collect_demonstrations,
     make_imitator_env,
+    make_policy,
     observation_dim,
 )
+from torchrl_causal.trainers.collection import ResumableCollector
 
 __all__ = ["GAILTrainer"]
 
@@ -39,16 +38,7 @@ class GAILTrainer(Trainer):
     """(Causal) GAIL; progress is counted in rounds."""
 
     unit = "rounds"
-
-    @property
-    def total(self) -> int:
-        return int(self.cfg.algo.rounds)
-
-    @classmethod
-    def build_policy(cls, cfg: DictConfig, env: EnvBase) -> TensorDictModuleBase:
-        a = cfg.algo.actor
-        return make_tanh_gaussian_actor(observation_dim(env), env.action_spec, hidden=int(a.hidden),
-                                        num_blocks=int(a.blocks), dropout=float(a.dropout))
+    budget_key = "algo.rounds"
 
     @property
     def policy(self) -> TensorDictModuleBase:
@@ -56,38 +46,34 @@ class GAILTrainer(Trainer):
 
     def setup(self) -> None:
         algo = self.cfg.algo
-        self.env = make_imitator_env(self.cfg, self.window, "train", int(algo.episodes_per_round), int(self.cfg.seed))
-        dim = observation_dim(self.env)
-        self.losses = make_gail_losses(
-            self.build_policy(self.cfg, self.env),
-            make_gail_value_network(dim, hidden=int(algo.value.hidden)),
-            make_gail_discriminator(dim, self.env.action_spec, hidden=int(algo.discriminator.hidden),
-                                    dropout=float(algo.discriminator.dropout)),
-            gamma=float(algo.gamma), gae_lambda=float(algo.gae_lambda), clip_epsilon=float(algo.clip_epsilon),
-            entropy_coeff=float(algo.entropy_coef), critic_coeff=float(algo.critic_coef),
-            gp_lambda=float(algo.gradient_penalty), normalize_advantage=bool(algo.normalize_advantage),
-        )
+        self.env = make_imitator_env(self.cfg, self.window, "train", algo.episodes_per_round, self.cfg.seed)
+        dim, spec = observation_dim(self.env), self.env.action_spec
+        self.losses = instantiate(algo.loss)(make_policy(self.cfg, self.env), instantiate(algo.value)(dim),
+                                             instantiate(algo.discriminator)(dim, spec))
         ppo = self.losses.policy
-        self.policy_optimizer = torch.optim.Adam([
-            {"params": list(ppo.actor_network_params.flatten_keys().values()), "lr": float(algo.lr_actor)},
-            {"params": list(ppo.critic_network_params.flatten_keys().values()), "lr": float(algo.lr_critic)},
-        ])
-        self.discriminator_optimizer = torch.optim.Adam(self.losses.discriminator.parameters(),
-                                                        lr=float(algo.lr_discriminator))
-        self.discriminator_schedule = torch.optim.lr_scheduler.StepLR(
-            self.discriminator_optimizer, step_size=int(algo.discriminator_lr_step), gamma=float(algo.discriminator_lr_gamma))
+        self.actor_optimizer = instantiate(algo.actor_optimizer)(list(ppo.actor_network_params.flatten_keys().values()))
+        self.critic_optimizer = instantiate(algo.critic_optimizer)(
+            list(ppo.critic_network_params.flatten_keys().values()))
+        self.discriminator_optimizer = instantiate(algo.discriminator_optimizer)(self.losses.discriminator.parameters())
+        self.discriminator_schedule = instantiate(algo.discriminator_scheduler)(self.discriminator_optimizer)
         self.expert = expert_transitions(self.window, load_or_collect_demonstrations(self.cfg)).select("observation", "action")
-        self.generator = torch.Generator().manual_seed(int(self.cfg.seed))
-        self.collector = None
+        self.generator = torch.Generator().manual_seed(self.cfg.seed)
+        self.collector = ResumableCollector(self.env, self.policy, frames_per_batch=algo.episodes_per_round * self.cfg.env.horizon,
+                                            total_frames=-1, device="cpu", auto_register_policy_transforms=False)
+        self.rollouts = iter(self.collector)
+
+    @property
+    def policy_optimizers(self) -> tuple[torch.optim.Optimizer, ...]:
+        return self.actor_optimizer, self.critic_optimizer
 
     def _sample(self, data: TensorDictBase, size: int) -> TensorDictBase:
         return data[torch.randint(data.numel(), (min(size, data.numel()),), generator=self.generator)]
 
     def _update_discriminator(self, rollout: TensorDictBase) -> float:
         algo = self.cfg.algo
-        size = min(int(algo.discriminator_batch_size), rollout.numel(), self.expert.numel())
+        size = min(algo.discriminator_batch_size, rollout.numel(), self.expert.numel())
         losses = []
-        for _ in range(int(algo.discriminator_updates)):
+        for _ in range(algo.discriminator_updates):
             batch = gail_discriminator_batch(self.losses.discriminator, self._sample(self.expert, size),
                                              self._sample(rollout, size))
             loss = self.losses.discriminator(batch)["loss"]
@@ -100,31 +86,27 @@ class GAILTrainer(Trainer):
     def _update_policy(self, rollout: TensorDictBase) -> dict[str, float]:
         algo = self.cfg.algo
         ppo = self.losses.policy
-        params = [p for group in self.policy_optimizer.param_groups for p in group["params"]]
+        params = [p for optimizer in self.policy_optimizers for group in optimizer.param_groups for p in group["params"]]
         sums: dict[str, float] = {}
         count = 0
-        for _ in range(int(algo.ppo_epochs)):
+        for _ in range(algo.ppo_epochs):
             order = torch.randperm(rollout.numel(), generator=self.generator)
-            for start in range(0, rollout.numel(), int(algo.batch_size)):
-                out = ppo(rollout[order[start:start + int(algo.batch_size)]])
+            for start in range(0, rollout.numel(), algo.batch_size):
+                out = ppo(rollout[order[start:start + algo.batch_size]])
                 loss = out["loss_objective"] + out["loss_critic"] + out["loss_entropy"]
-                self.policy_optimizer.zero_grad(set_to_none=True)
+                for optimizer in self.policy_optimizers:
+                    optimizer.zero_grad(set_to_none=True)
                 loss.backward()
-                torch.nn.utils.clip_grad_norm_(params, float(algo.max_grad_norm))
-                self.policy_optimizer.step()
+                torch.nn.utils.clip_grad_norm_(params, algo.max_grad_norm)
+                for optimizer in self.policy_optimizers:
+                    optimizer.step()
                 for key in ("loss_objective", "loss_critic", "loss_entropy"):
                     sums[key] = sums.get(key, 0.0) + out[key].item()
                 count += 1
         return {f"train/{k}": v / count for k, v in sums.items()}
 
     def train_step(self) -> Mapping[str, float]:
-        algo = self.cfg.algo
-        if self.collector is None:
-            self.env.set_seed(int(self.cfg.seed) * 1_000_003 + self.progress)
-            frames = int(algo.episodes_per_round) * int(self.cfg.env.horizon)
-            self.collector = iter(Collector(self.env, self.policy, frames_per_batch=frames, total_frames=-1, device="cpu",
-                                            auto_register_policy_transforms=False))
-        rollout = next(self.collector)  # [episodes_per_round, horizon], time last
+        rollout = next(self.rollouts)  # [episodes_per_round, horizon], time last
         scalars = {"train/env_reward_per_step": rollout["next", "reward"].mean().item(),
                    "train/loss_discriminator": self._update_discriminator(rollout.reshape(-1))}
         with torch.no_grad():
@@ -137,24 +119,26 @@ class GAILTrainer(Trainer):
         return scalars
 
     def close(self) -> None:
-        self.collector = None
-        self.env.close()
+        self.collector.shutdown()
 
     def training_state(self) -> dict[str, Any]:
         return {
             "policy_loss": self.losses.policy.state_dict(),
             "discriminator": self.losses.discriminator.state_dict(),
-            "policy_optimizer": self.policy_optimizer.state_dict(),
+            "actor_optimizer": self.actor_optimizer.state_dict(),
+            "critic_optimizer": self.critic_optimizer.state_dict(),
             "discriminator_optimizer": self.discriminator_optimizer.state_dict(),
             "discriminator_schedule": self.discriminator_schedule.state_dict(),
             "generator": self.generator.get_state(),
+            "collector": self.collector.state_dict(),
         }
 
     def load_training_state(self, state: Mapping[str, Any]) -> None:
         self.losses.policy.load_state_dict(state["policy_loss"])
         self.losses.discriminator.load_state_dict(state["discriminator"])
-        self.policy_optimizer.load_state_dict(state["policy_optimizer"])
+        self.actor_optimizer.load_state_dict(state["actor_optimizer"])
+        self.critic_optimizer.load_state_dict(state["critic_optimizer"])
         self.discriminator_optimizer.load_state_dict(state["discriminator_optimizer"])
         self.discriminator_schedule.load_state_dict(state["discriminator_schedule"])
         self.generator.set_state(state["generator"])
-        self.collector = None
+        self.collector.load_state_dict(state["collector"])

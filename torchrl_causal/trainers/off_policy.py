@@ -1,142 +1,120 @@
 """Off-policy imitation (Causal SQIL, Causal IQ-Learn): the paper's Algorithms 2 and 3.
 
-A TorchRL :class:`~torchrl.collectors.Collector` steps the imitator's env (the causal
-window's encoding in ``"observation"``) and fills a policy replay buffer; the
-demonstrations, encoded by the same window, fill a static expert buffer with
-``"expert"`` = True. Each gradient step draws half its batch from each buffer (the
-paper's expert buffer ratio 0.5), updates the twin critics (cosine-annealed learning
-rate), the actor and the entropy coefficient with gradient-norm clipping, then the
-target critics by Polyak averaging. The first ``random_steps`` env steps use uniformly
-random actions; afterwards ``utd_ratio`` gradient steps follow every env step.
+A TorchRL collector steps the imitator's env (the causal window's encoding in
+``"observation"``) and fills a policy replay buffer; the demonstrations, encoded by the
+same window, fill a static expert buffer with ``"expert"`` = True. Each gradient step
+draws half its batch from each buffer (the paper's expert buffer ratio 0.5), updates the
+twin critics (cosine-annealed learning rate), the actor and the entropy coefficient with
+gradient-norm clipping, then the target critics by Polyak averaging. The first
+``random_steps`` env steps use uniformly random actions; afterwards ``utd_ratio``
+gradient steps follow every env step.
+
+The policy buffer is a memory-mapped TorchRL storage in the run directory
+(``replay/``): a checkpoint records its length and write cursor, never its contents.
 """
 
 from __future__ import annotations
 
+import logging
 import math
+import shutil
 from collections.abc import Mapping
 from typing import Any
 
 import torch
+from hydra.utils import instantiate
 from omegaconf import DictConfig
-from tensordict import TensorDict
 from tensordict.nn import TensorDictModuleBase
-from torchrl.collectors import Collector
-from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
-from torchrl.envs import EnvBase
-from torchrl.objectives import SoftUpdate
+from torchrl.data import LazyMemmapStorage, LazyTensorStorage, TensorDictReplayBuffer
 
-from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
-from torchrl_causal.objectives import IQLearnLoss, SQILLoss
+from torchrl_causal.objectives import ExpertFlaggedSACLoss
 from torchrl_causal.trainers.base import Trainer
 from torchrl_causal.trainers.builders import (
     TRANSITION_KEYS,
     expert_transitions,
     load_or_collect_demonstrations,
     make_imitator_env,
+    make_policy,
     observation_dim,
 )
+from torchrl_causal.trainers.collection import ResumableCollector
+from torchrl_causal.trainers.run_directory import CheckpointError
 
 __all__ = ["OffPolicyILTrainer"]
 
 _COLLECTED_KEYS = (*TRANSITION_KEYS, ("next", "reward"))
 
+log = logging.getLogger(__name__)
+
 
 class OffPolicyILTrainer(Trainer):
-    """SQIL / IQ-Learn on causally encoded observations (``cfg.algo.loss``).
+    """SQIL / IQ-Learn (``cfg.algo.loss``) on causally encoded observations.
 
     Progress is counted in env steps up to ``cfg.algo.total_steps``.
     """
 
     unit = "env steps"
-
-    @property
-    def total(self) -> int:
-        return int(self.cfg.algo.total_steps)
+    budget_key = "algo.total_steps"
 
     @classmethod
-    def build_policy(cls, cfg: DictConfig, env: EnvBase) -> TensorDictModuleBase:
-        a = cfg.algo.actor
-        return make_tanh_gaussian_actor(observation_dim(env), env.action_spec, hidden=int(a.hidden),
-                                        num_blocks=int(a.blocks), dropout=float(a.dropout))
+    def extendable_budget(cls, cfg: DictConfig) -> bool:
+        # A cosine schedule spans the budget: a longer run is another run.
+        return cfg.algo.critic_scheduler is None
 
     @property
     def policy(self) -> TensorDictModuleBase:
         return self.loss.actor_network
 
-    def _make_loss(self, env: EnvBase) -> SQILLoss | IQLearnLoss:
+    def _make_loss(self) -> ExpertFlaggedSACLoss:
         algo = self.cfg.algo
-        actor = self.build_policy(self.cfg, env)
-        critic = make_qvalue_network(observation_dim(env), env.action_spec, hidden=int(algo.critic.hidden),
-                                     num_blocks=int(algo.critic.blocks), dropout=float(algo.critic.dropout))
-        kwargs: dict[str, Any] = dict(alpha_init=float(algo.alpha_init), min_alpha=float(algo.alpha_min),
-                                      max_alpha=float(algo.alpha_max), target_entropy=algo.target_entropy)
-        if algo.loss == "sqil":
-            loss = SQILLoss(actor, critic, **kwargs)
-        elif algo.loss == "iq_learn":
-            loss = IQLearnLoss(actor, critic, num_value_samples=int(algo.value_samples), **kwargs)
-        else:
-            raise ValueError(f"algo.loss must be 'sqil' or 'iq_learn', got {algo.loss!r}")
-        loss.make_value_estimator(gamma=float(algo.gamma))
+        dim, spec = observation_dim(self.env), self.env.action_spec
+        loss = instantiate(algo.loss)(make_policy(self.cfg, self.env), instantiate(algo.critic)(dim, spec))
+        loss.make_value_estimator(**algo.value_estimator)
         return loss
 
     def setup(self) -> None:
         algo = self.cfg.algo
-        self.env = make_imitator_env(self.cfg, self.window, "train", int(algo.num_envs), int(self.cfg.seed))
-        self.loss = self._make_loss(self.env)
-        self.target_updater = SoftUpdate(self.loss, tau=float(algo.tau))
-        self.actor_optimizer = torch.optim.Adam(self.loss.actor_network_params.flatten_keys().values(),
-                                                lr=float(algo.lr_actor))
-        self.critic_optimizer = torch.optim.Adam(self.loss.qvalue_network_params.flatten_keys().values(),
-                                                 lr=float(algo.lr_critic))
-        self.alpha_optimizer = torch.optim.Adam([self.loss.log_alpha], lr=float(algo.lr_alpha))
-        self.total_updates = max(1, math.ceil(self.updates_per_step * max(0, self.total - int(algo.random_steps))))
-        if algo.critic_lr_schedule == "cosine":
-            self.critic_schedule = torch.optim.lr_scheduler.CosineAnnealingLR(self.critic_optimizer, self.total_updates)
-        elif algo.critic_lr_schedule in (None, "none", "constant"):
-            self.critic_schedule = None
-        else:
-            raise ValueError(f"algo.critic_lr_schedule must be 'cosine' or 'none', got {algo.critic_lr_schedule!r}")
-        half = int(algo.batch_size) // 2
-        if half < 1 or not 0.0 < float(algo.expert_ratio) < 1.0:
-            raise ValueError(f"need batch_size >= 2 and 0 < expert_ratio < 1, got {algo.batch_size}, {algo.expert_ratio}")
-        expert_batch = round(int(algo.batch_size) * float(algo.expert_ratio))
+        self.env = make_imitator_env(self.cfg, self.window, "train", algo.num_envs, self.cfg.seed)
+        self.loss = self._make_loss()
+        self.target_updater = instantiate(algo.target_update)(self.loss)
+        self.actor_optimizer = instantiate(algo.actor_optimizer)(self.loss.actor_network_params.flatten_keys().values())
+        self.critic_optimizer = instantiate(algo.critic_optimizer)(
+            self.loss.qvalue_network_params.flatten_keys().values())
+        self.alpha_optimizer = instantiate(algo.alpha_optimizer)([self.loss.log_alpha])
+        self.total_updates = max(1, math.ceil(algo.utd_ratio * max(0, self.total - algo.random_steps)))
+        self.critic_schedule = None
+        if algo.critic_scheduler is not None:
+            self.critic_schedule = instantiate(algo.critic_scheduler)(self.critic_optimizer, T_max=self.total_updates)
+        expert_batch = round(algo.batch_size * algo.expert_ratio)
+        if not 1 <= expert_batch < algo.batch_size:
+            raise ValueError(f"algo.batch_size={algo.batch_size} x algo.expert_ratio={algo.expert_ratio} leaves an "
+                             "empty expert or policy half")
         demos = expert_transitions(self.window, load_or_collect_demonstrations(self.cfg))
         self.expert_buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(demos.numel()), batch_size=expert_batch)
         self.expert_buffer.extend(demos)
-        self.policy_buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(int(algo.buffer_size)),
-                                                    batch_size=int(algo.batch_size) - expert_batch)
+        self.policy_buffer = TensorDictReplayBuffer(
+            storage=LazyMemmapStorage(algo.buffer_size, scratch_dir=self.run.replay_dir / "storage", existsok=True),
+            batch_size=algo.batch_size - expert_batch)
         self.updates = 0
         self.update_debt = 0.0  # fractional gradient steps owed by the UTD ratio
-        self.collector = None
-
-    @property
-    def updates_per_step(self) -> float:
-        return float(self.cfg.algo.utd_ratio)
-
-    def _make_collector(self) -> Collector:
-        algo = self.cfg.algo
-        frames = int(algo.frames_per_batch)
-        remaining_random = max(0, int(algo.random_steps) - self.progress)
-        # Resume restarts the episodes (env state is not checkpointed) with a fresh seed.
-        self.env.set_seed(int(self.cfg.seed) * 1_000_003 + self.progress)
-        return Collector(
+        frames = algo.frames_per_batch
+        self.collector = ResumableCollector(
             self.env, self.policy, frames_per_batch=frames, total_frames=-1,
-            init_random_frames=math.ceil(remaining_random / frames) * frames if remaining_random else None,
+            init_random_frames=math.ceil(algo.random_steps / frames) * frames if algo.random_steps else None,
             device="cpu", auto_register_policy_transforms=False,
         )
+        self.batches = iter(self.collector)
 
     def train_step(self) -> Mapping[str, float]:
-        if self.collector is None:
-            self.collector = iter(self._make_collector())
-        batch = next(self.collector)
+        batch = next(self.batches)
         transitions = batch.reshape(-1).select(*_COLLECTED_KEYS)
         transitions.set("expert", torch.zeros((*transitions.batch_size, 1), dtype=torch.bool))
         self.policy_buffer.extend(transitions.exclude(("next", "reward")))
         self.progress += transitions.numel()
         scalars: dict[str, float] = {"train/reward_per_step": transitions["next", "reward"].mean().item()}
-        if self.progress <= int(self.cfg.algo.random_steps):
+        if self.progress <= self.cfg.algo.random_steps:
             return scalars
-        self.update_debt += self.updates_per_step * transitions.numel()
+        self.update_debt += self.cfg.algo.utd_ratio * transitions.numel()
         losses = []
         while self.update_debt >= 1.0:
             self.update_debt -= 1.0
@@ -157,9 +135,8 @@ class OffPolicyILTrainer(Trainer):
         # SACLoss detaches the critics inside the actor loss, so one backward pass gives
         # each network the gradient of its own objective.
         (out["loss_qvalue"] + out["loss_actor"] + out["loss_alpha"]).backward()
-        max_norm = float(self.cfg.algo.max_grad_norm)
         for params in (self.loss.qvalue_network_params, self.loss.actor_network_params):
-            torch.nn.utils.clip_grad_norm_(list(params.flatten_keys().values()), max_norm)
+            torch.nn.utils.clip_grad_norm_(list(params.flatten_keys().values()), self.cfg.algo.max_grad_norm)
         for optimizer in self.optimizers:
             optimizer.step()
         if self.critic_schedule is not None and self.updates < self.total_updates:
@@ -170,17 +147,25 @@ class OffPolicyILTrainer(Trainer):
                 "train/alpha": out["alpha"].item(), "train/entropy": out["entropy"].item()}
 
     def close(self) -> None:
-        self.collector = None
-        self.env.close()
+        self.collector.shutdown()
+
+    def finish(self) -> None:
+        """Drops the replay buffer of a finished run that cannot be continued."""
+        if not self.extendable_budget(self.cfg):
+            shutil.rmtree(self.run.replay_dir, ignore_errors=True)
 
     def training_state(self) -> dict[str, Any]:
+        # Zero-copy: the storage already lives in replay/storage; this writes its length,
+        # the writer's cursor and the sampler's state beside it.
+        self.policy_buffer.dumps(self.run.replay_dir)
         return {
             "loss": self.loss.state_dict(),
             "actor_optimizer": self.actor_optimizer.state_dict(),
             "critic_optimizer": self.critic_optimizer.state_dict(),
             "alpha_optimizer": self.alpha_optimizer.state_dict(),
             "critic_schedule": self.critic_schedule.state_dict() if self.critic_schedule is not None else {},
-            "policy_buffer": self.policy_buffer.state_dict(),
+            "policy_buffer_len": len(self.policy_buffer),
+            "collector": self.collector.state_dict(),
             "updates": self.updates,
             "update_debt": self.update_debt,
         }
@@ -192,7 +177,16 @@ class OffPolicyILTrainer(Trainer):
         self.alpha_optimizer.load_state_dict(state["alpha_optimizer"])
         if self.critic_schedule is not None:
             self.critic_schedule.load_state_dict(state["critic_schedule"])
-        self.policy_buffer.load_state_dict(state["policy_buffer"])
+        if state["policy_buffer_len"]:
+            try:
+                self.policy_buffer.loads(self.run.replay_dir)
+            except (OSError, ValueError, KeyError) as error:
+                raise CheckpointError(f"the replay buffer in {self.run.replay_dir} cannot be read: {error}") from error
+            if len(self.policy_buffer) != state["policy_buffer_len"]:
+                # The run was killed between saving the buffer and the checkpoint: the
+                # buffer holds a few more (valid) transitions than the checkpoint counted.
+                log.warning("the replay buffer in %s holds %d transitions, the checkpoint counted %d; continuing",
+                            self.run.replay_dir, len(self.policy_buffer), state["policy_buffer_len"])
+        self.collector.load_state_dict(state["collector"])
         self.updates = int(state["updates"])
         self.update_debt = float(state["update_debt"])
-        self.collector = None
