@@ -17,9 +17,11 @@ command that resumes it.
 from __future__ import annotations
 
 import logging
+import shutil
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
 import hydra
 import torch
@@ -67,6 +69,16 @@ def _run_log(run: RunDirectory) -> Iterator[None]:
         handler.close()
 
 
+def _first_missing(path: Path) -> Path | None:
+    """The outermost folder of ``path`` that does not exist yet (``None``: it exists)."""
+    missing = None
+    for folder in (path, *path.parents):
+        if folder.exists():
+            break
+        missing = folder
+    return missing
+
+
 def _stored_results(run: RunDirectory) -> dict[str, EvaluationResult]:
     return {regime: EvaluationResult.from_dict(run.read_json(run.eval_path(regime)))
             for regime in REGIMES if run.eval_path(regime).is_file()}
@@ -87,7 +99,7 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
     run_dir = RunDirectory(cfg.run_dir)
     if not cfg.resume:
         run_dir.discard()
-    fresh = not run_dir.path.exists()
+    created = _first_missing(run_dir.path)  # what a failure before any checkpoint removes
     extendable = trainer_class is not None and trainer_class.extendable_budget(cfg)
     run_dir.claim(cfg, ignored=(trainer_class.budget_key,) if extendable else ())
     status = run_dir.read_status()
@@ -102,8 +114,8 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
                 run_dir.update_status("interrupted")
             raise
         except Exception as error:
-            if fresh and not run_dir.last_checkpoint.is_file():
-                run_dir.discard()  # nothing worth keeping: leave no half-made run directory behind
+            if created is not None and not run_dir.last_checkpoint.is_file():
+                shutil.rmtree(created, ignore_errors=True)  # leave no half-made run directory behind
             else:
                 run_dir.update_status("failed", error=f"{type(error).__name__}: {error}")
             raise
