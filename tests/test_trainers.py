@@ -23,7 +23,7 @@ from torchrl_causal.train import run
 from torchrl_causal.trainers import (
     CheckpointError,
     ConfigMismatchError,
-    ConfigRangeError,
+    ConfigValueError,
     RunDirectory,
     RunInterrupted,
     compose_config,
@@ -164,7 +164,7 @@ def test_raising_the_budget_continues_a_finished_run(tmp_path: Path) -> None:
 
 def test_out_of_range_values_fail_before_a_run_directory_exists(tmp_path: Path, monkeypatch) -> None:
     for change in ("eval.final_episodes=0", "demos.episodes=0", "algo.num_envs=0", "env.confounding_strength=1.5"):
-        with pytest.raises(ConfigRangeError, match=change.split("=")[0].replace(".", r"\.")):
+        with pytest.raises(ConfigValueError, match=change.split("=")[0].replace(".", r"\.")):
             run(tiny_config(tmp_path, "rovermaze_u", "sqil", True, change))
     assert not (tmp_path / "rovermaze_u").exists()
     # A failure after the directory was claimed but before any checkpoint leaves nothing either.

@@ -7,11 +7,15 @@ logs one line at most every ``interval_s`` seconds and one at the end, through t
 ``torchrl_causal.progress`` logger.
 
 Examples:
-    >>> import logging, sys
-    >>> logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stdout, force=True)
-    >>> with progress(3, "demo", "episodes", interval_s=3600) as bar:  # stderr is not a terminal here
+    >>> import io
+    >>> lines = io.StringIO()
+    >>> handler = logging.StreamHandler(lines)
+    >>> log.addHandler(handler); log.setLevel(logging.INFO)
+    >>> with Progress(3, "demo", "episodes", interval_s=3600) as bar:  # what progress() gives off a terminal
     ...     for _ in range(3):
     ...         bar.update(1)
+    >>> log.removeHandler(handler); log.setLevel(logging.NOTSET)
+    >>> print(lines.getvalue(), end="")
     demo: 3/3 episodes (100%)
 """
 

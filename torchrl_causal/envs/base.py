@@ -300,13 +300,14 @@ class ConfoundedEnv(EnvBase):
         Examples:
             >>> from torchrl_causal.envs import RoverMazeEnv
             >>> env = RoverMazeEnv(maze="u", batch_size=(2,), seed=0)
-            >>> td = env.rollout(3)
-            >>> saved = env.state_dict()
-            >>> continued = env.rollout(4, auto_reset=False, tensordict=td[..., -1]["next"].clone())
-            >>> env.load_state_dict(saved)
-            >>> again = env.rollout(4, auto_reset=False, tensordict=td[..., -1]["next"].clone())
-            >>> bool((again["next", "P"] == continued["next", "P"]).all())
-            True
+            >>> forward = lambda td: td.set("action", torch.full((2, 2), 0.5))
+            >>> td = env.rollout(3, forward)
+            >>> saved = env.state_dict()  # mid-episode
+            >>> continued = env.rollout(4, forward, auto_reset=False, tensordict=td[..., -1]["next"].clone())
+            >>> _ = env.load_state_dict(saved)
+            >>> again = env.rollout(4, forward, auto_reset=False, tensordict=td[..., -1]["next"].clone())
+            >>> torch.equal(again["next", "P"], continued["next", "P"]), torch.equal(again["W"], continued["W"])
+            (True, True)
         """
         state: dict[str, Any] = {"rng": self.rng.get_state()}
         for name in self.runtime_attributes:

@@ -26,16 +26,19 @@ class ResumableCollector(Collector):
 
     Examples:
         >>> import torch
+        >>> from tensordict.nn import TensorDictModule
         >>> from torchrl.envs import TransformedEnv
         >>> from torchrl_causal.envs import RoverMazeEnv
-        >>> make = lambda: TransformedEnv(RoverMazeEnv(maze="u", batch_size=(2,), seed=0))
-        >>> collector = ResumableCollector(make(), None, frames_per_batch=8, total_frames=-1)  # random actions
+        >>> policy = TensorDictModule(torch.nn.Linear(2, 2), in_keys=["P"], out_keys=["action"])
+        >>> make = lambda: ResumableCollector(TransformedEnv(RoverMazeEnv(maze="u", batch_size=(2,), seed=0)),
+        ...                                   policy, frames_per_batch=8, total_frames=-1)
+        >>> collector = make()
         >>> batches = iter(collector)
         >>> _ = next(batches)
-        >>> saved, rng = collector.state_dict(), torch.get_rng_state()
+        >>> saved = collector.state_dict()  # mid-episode: 4 steps into the first episodes
         >>> expected = next(batches)["next", "P"]
-        >>> restored = ResumableCollector(make(), None, frames_per_batch=8, total_frames=-1)
-        >>> restored.load_state_dict(saved); torch.set_rng_state(rng)
+        >>> restored = make()
+        >>> restored.load_state_dict(saved)
         >>> torch.equal(next(iter(restored))["next", "P"], expected)
         True
     """

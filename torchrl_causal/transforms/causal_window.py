@@ -58,9 +58,9 @@ class CausalWindowTransform(Transform):
     **State.** One ring buffer of the last ``k + 1`` frames per environment of the
     (arbitrarily shaped) batch, zeroed when an environment is reset; a partial reset
     (``"_reset"`` mask) clears only the environments it names. The window itself, the
-    keys and the variable shapes are saved in the module's state dict
-    (:meth:`get_extra_state`), so a reloaded transform encodes identically, and loading
-    the state of a different window raises.
+    keys, the variable shapes and the ring buffer are saved in the module's state dict
+    (:meth:`get_extra_state`), so a reloaded transform encodes identically and continues
+    the episodes in flight, and loading the state of a different window raises.
 
     **Offline.** :meth:`encode_trajectories` encodes stored, time-ordered episodes (a
     demonstration dataset, a rollout) and gives exactly the tensors the transform
