@@ -31,7 +31,8 @@ class ResumableCollector(Collector):
         >>> from torchrl_causal.envs import RoverMazeEnv
         >>> policy = TensorDictModule(torch.nn.Linear(2, 2), in_keys=["P"], out_keys=["action"])
         >>> make = lambda: ResumableCollector(TransformedEnv(RoverMazeEnv(maze="u", batch_size=(2,), seed=0)),
-        ...                                   policy, frames_per_batch=8, total_frames=-1)
+        ...                                   policy, frames_per_batch=8, total_frames=-1,
+        ...                                   auto_register_policy_transforms=False)
         >>> collector = make()
         >>> batches = iter(collector)
         >>> _ = next(batches)
