@@ -42,12 +42,12 @@ import torch
 from tensordict import TensorDict
 from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.data import Bounded
-from torchrl.objectives import SACLoss
+from torchrl.objectives import SACLoss, SoftUpdate
 
 from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
 from torchrl_causal.objectives import ALPHA_CLAMP, IQLearnLoss, SQILLoss
-from torchrl_causal.trainers import OffPolicyILTrainer, compose_config
-from torchrl_causal.trainers.builders import make_env, make_imitator_env, make_window
+from torchrl_causal.trainers import compose_config
+from torchrl_causal.trainers.builders import make_imitator_env, make_policy, make_window
 from torchrl_causal.trainers.device import CPU, resolve_device
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
@@ -84,8 +84,11 @@ def make_update(name: str, device: torch.device, compile: bool) -> ActorCriticUp
     critic = make_qvalue_network(OBSERVATION_DIM, spec, hidden=HIDDEN, num_blocks=BLOCKS)
     loss = LOSSES[name](actor.to(device), critic.to(device))
     loss.make_value_estimator(gamma=0.99)
-    return ActorCriticUpdate(loss.to(device), lr_actor=3e-4, lr_critic=3e-4, lr_alpha=3e-4, max_grad_norm=1.0,
-                             tau=0.005, cosine_updates=500_000, compile=compile)
+    adam = partial(torch.optim.Adam, lr=3e-4)
+    return ActorCriticUpdate(loss.to(device), actor_optimizer=adam, critic_optimizer=adam, alpha_optimizer=adam,
+                             target_update=partial(SoftUpdate, tau=0.005), max_grad_norm=1.0,
+                             critic_scheduler=torch.optim.lr_scheduler.CosineAnnealingLR, cosine_updates=500_000,
+                             compile=compile)
 
 
 def timed_rate(update: ActorCriticUpdate, batches: list[TensorDict], device: torch.device, clock: str) -> float:
@@ -146,9 +149,9 @@ def collector_rate(device: torch.device, workers: int, num_envs: int, frames: in
     with tempfile.TemporaryDirectory() as root:
         cfg = compose_config(["env=antmaze_medium", "scale=paper", "algo=sqil", f"run_root={root}",
                               f"algo.num_envs={num_envs}", f"collector_workers={workers}"])
-        window = make_window(cfg, make_env(cfg, "train", 1, 0))
+        window = make_window(cfg)
         env = make_imitator_env(cfg, window, "train", num_envs // workers, 0)
-        policy = OffPolicyILTrainer.build_policy(cfg, env).to(device)
+        policy = make_policy(cfg, env).to(device)
         devices = dict(env_device=CPU, policy_device=device, storing_device=device)
         if workers == 1:
             collector = Collector(env, policy, frames_per_batch=frames, total_frames=-1,

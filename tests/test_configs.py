@@ -1,17 +1,22 @@
-"""The Hydra config tree: every env x algo composes, scale=paper is Appendix E exactly,
-overrides reach the run, experiments sweep what the paper sweeps."""
+"""The Hydra config tree: every combination of its groups composes and validates, every
+``_target_`` resolves, bad values fail at composition, scale=paper is Appendix E
+exactly, overrides reach the run, experiments sweep what the paper sweeps."""
 
 from __future__ import annotations
 
+import itertools
 import subprocess
 import sys
+from collections.abc import Iterator, Mapping
+from typing import Any
 
 import pytest
-from hydra.utils import instantiate
+from hydra.errors import ConfigCompositionException, MissingConfigException
+from hydra.utils import get_class, get_object, instantiate
 from omegaconf import OmegaConf
 from omegaconf.errors import InterpolationResolutionError
 
-from torchrl_causal.trainers import CONFIG_DIR, TRAINERS, compose_config, run_label
+from torchrl_causal.trainers import CONFIG_DIR, ConfigValueError, Trainer, compose_config, run_label, validate_config
 
 ENVS = ("rovermaze_u", "rovermaze_medium", "rovermaze_large", "route_choice",
         "antmaze_medium", "antmaze_large", "humanoidmaze_medium", "humanoidmaze_large")
@@ -20,46 +25,160 @@ ALGOS = ("bc", "gail", "sqil", "iq_learn", "iq_learn_garg", "expert")
 # Appendix E, tab:hparams, transcribed: (key in the algo config, value) per algorithm,
 # shared by both environment families.
 PAPER_SHARED = {
-    "bc": {"actor.hidden": 256, "actor.blocks": 4, "actor.dropout": 0.0, "lr": 3e-4, "batch_size": 2048,
+    "bc": {"actor.hidden": 256, "actor.num_blocks": 4, "actor.dropout": 0.0, "optimizer.lr": 3e-4, "batch_size": 2048,
            "val_fraction": 0.2},
-    "gail": {"actor.hidden": 256, "actor.blocks": 3, "actor.dropout": 0.0,  # 0.05 in the paper: see gail.yaml
-             "lr_actor": 1e-4, "lr_critic": 3e-4,
-             "batch_size": 1024, "gamma": 0.99, "max_grad_norm": 0.5, "clip_epsilon": 0.2, "gae_lambda": 0.95,
-             "entropy_coef": 1e-2, "critic_coef": 0.5, "normalize_advantage": True, "lr_discriminator": 3e-4,
-             "discriminator.dropout": 0.2, "discriminator_updates": 2, "discriminator_batch_size": 1024,
-             "gradient_penalty": 5.0, "discriminator_lr_step": 100, "discriminator_lr_gamma": 0.5},
-    "sqil": {"actor.hidden": 256, "actor.blocks": 3, "actor.dropout": 0.05, "critic.hidden": 256, "critic.blocks": 3,
-             "lr_actor": 3e-4, "lr_critic": 3e-4, "batch_size": 256, "gamma": 0.99, "max_grad_norm": 1.0,
-             "tau": 0.005, "lr_alpha": 3e-4, "target_entropy": "auto", "alpha_min": 0.001, "alpha_max": 0.1,
-             "buffer_size": 1_000_000, "expert_ratio": 0.5, "random_steps": 5000, "total_steps": 2_000_000,
-             "critic_lr_schedule": "cosine"},
+    "gail": {"actor.hidden": 256, "actor.num_blocks": 3, "actor.dropout": 0.0,  # 0.05 in the paper: see gail.yaml
+             "actor_optimizer.lr": 1e-4,
+             "critic_optimizer.lr": 3e-4, "batch_size": 1024, "loss.gamma": 0.99, "max_grad_norm": 0.5,
+             "loss.clip_epsilon": 0.2, "loss.gae_lambda": 0.95, "loss.entropy_coeff": 1e-2, "loss.critic_coeff": 0.5,
+             "loss.normalize_advantage": True, "discriminator_optimizer.lr": 3e-4, "discriminator.dropout": 0.2,
+             "discriminator_updates": 2, "discriminator_batch_size": 1024, "loss.gp_lambda": 5.0,
+             "discriminator_scheduler.step_size": 100, "discriminator_scheduler.gamma": 0.5},
+    "sqil": {"actor.hidden": 256, "actor.num_blocks": 3, "actor.dropout": 0.05, "critic.hidden": 256,
+             "critic.num_blocks": 3, "actor_optimizer.lr": 3e-4, "critic_optimizer.lr": 3e-4, "batch_size": 256,
+             "value_estimator.gamma": 0.99, "max_grad_norm": 1.0, "target_update.tau": 0.005,
+             "alpha_optimizer.lr": 3e-4, "loss.target_entropy": "auto", "loss.min_alpha": 0.001,
+             "loss.max_alpha": 0.1, "buffer_size": 1_000_000, "expert_ratio": 0.5, "random_steps": 5000,
+             "total_steps": 2_000_000, "critic_scheduler._target_": "torch.optim.lr_scheduler.CosineAnnealingLR"},
 }
 PAPER_SHARED["iq_learn"] = PAPER_SHARED["sqil"]
 # The per-family entries of tab:hparams (A = AntMaze, H = HumanoidMaze).
 PAPER_FAMILY = {
     "antmaze_medium": {"k": 10, "utd_ratio": 0.25, "ppo_epochs": 4, "episodes_per_round": 20, "rounds": 500,
-                       "epochs": 100, "patience": 15, "value_samples": 16, "horizon": 1000},
+                       "epochs": 100, "patience": 15, "num_value_samples": 16, "horizon": 1000},
     "antmaze_large": {"k": 10, "utd_ratio": 0.25, "ppo_epochs": 4, "episodes_per_round": 20, "rounds": 500,
-                      "epochs": 100, "patience": 15, "value_samples": 16, "horizon": 1000},
+                      "epochs": 100, "patience": 15, "num_value_samples": 16, "horizon": 1000},
     "humanoidmaze_medium": {"k": 2, "utd_ratio": 0.5, "ppo_epochs": 2, "episodes_per_round": 10, "rounds": 200,
-                            "epochs": 100, "patience": 30, "value_samples": 1, "horizon": 2000},
+                            "epochs": 100, "patience": 30, "num_value_samples": 1, "horizon": 2000},
     "humanoidmaze_large": {"k": 2, "utd_ratio": 0.5, "ppo_epochs": 2, "episodes_per_round": 10, "rounds": 200,
-                           "epochs": 200, "patience": 15, "value_samples": 1, "horizon": 2000},
+                           "epochs": 200, "patience": 15, "num_value_samples": 1, "horizon": 2000},
 }
 FAMILY_KEYS = {"bc": ("epochs", "patience"), "gail": ("ppo_epochs", "episodes_per_round", "rounds"),
-               "sqil": ("utd_ratio",), "iq_learn": ("utd_ratio", "value_samples")}
+               "sqil": ("utd_ratio",), "iq_learn": ("utd_ratio", "loss.num_value_samples")}
 
 
-@pytest.mark.parametrize("env", ENVS)
-def test_every_env_and_algo_composes(env: str) -> None:
-    for algo in ALGOS:
-        for scale in ("cpu", "paper"):
-            cfg = compose_config([f"env={env}", f"algo={algo}", f"scale={scale}", "causal=false", "seed=4"])
-            resolved = OmegaConf.to_container(cfg, resolve=True)  # every interpolation resolves
-            assert resolved["algo"]["trainer"] in TRAINERS
-            assert resolved["env"]["name"] == env
-            assert resolved["run_dir"] == f"runs/{cfg.run_name}"
-            assert cfg.run_name.endswith(f"/{run_label(algo, False)}/seed4")
+GROUPS = {group: sorted(p.stem for p in (CONFIG_DIR / group).glob("*.yaml"))
+          for group in ("env", "algo", "window", "logger", "scale")}
+
+
+def _targets(node: Any, where: str = "") -> Iterator[tuple[str, str]]:
+    if isinstance(node, Mapping):
+        if "_target_" in node:
+            yield where, node["_target_"]
+        for key, value in node.items():
+            yield from _targets(value, f"{where}.{key}" if where else str(key))
+
+
+def test_groups_are_the_expected_ones() -> None:
+    assert GROUPS["env"] == sorted(ENVS) and GROUPS["algo"] == sorted(ALGOS)
+    assert GROUPS["window"] == ["default", "matched"] and GROUPS["scale"] == ["cpu", "cpu_ant", "paper"]
+    assert GROUPS["logger"] == ["csv", "tensorboard"]
+
+
+@pytest.mark.parametrize("env", GROUPS["env"])
+def test_every_group_combination_composes_validates_and_resolves_its_targets(env: str) -> None:
+    """env x algo x scale in full (``algo_scale`` depends on the algo and scale pair);
+    window and logger, which interact with nothing but ``${env.window_k}``, take each of
+    their two options with every env and every algo."""
+    for index, (algo, scale) in enumerate(itertools.product(GROUPS["algo"], GROUPS["scale"])):
+        window = GROUPS["window"][index % 2]
+        logger = GROUPS["logger"][(index % 2 + index // 2) % 2]  # each algo gets both windows and both loggers
+        causal = window != "matched"  # the window-matched baseline is non-causal by definition
+        cfg = compose_config([f"env={env}", f"algo={algo}", f"window={window}", f"logger={logger}", f"scale={scale}",
+                              f"causal={causal}", "seed=4"])
+        resolved = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+        if resolved["env"]["expert"] is None:  # HumanoidMaze: no expert shipped, so every run is refused
+            with pytest.raises(ConfigValueError, match="has no expert"):
+                validate_config(cfg)
+        else:
+            validate_config(cfg)
+        assert resolved["env"]["name"] == env and resolved["algo"]["name"] == algo
+        assert resolved["run_dir"] == f"runs/{cfg.run_name}"
+        assert cfg.run_name.endswith(f"/{run_label(algo, causal, window == 'matched')}/seed4")
+        trainer = resolved["algo"]["trainer"]
+        assert (trainer is None) == (algo == "expert")
+        if trainer is not None:
+            assert issubclass(get_class(trainer), Trainer)
+        targets = dict(_targets(resolved))
+        assert {"env.make", "logger"} <= set(targets) and ("env.expert" in targets) == (resolved["env"]["expert"] is not None)
+        for where, target in targets.items():
+            assert callable(get_object(target)), (env, algo, where, target)
+
+
+def test_networks_and_losses_instantiate_from_the_config() -> None:
+    from torchrl.data import Bounded
+
+    spec = Bounded(-1.0, 1.0, shape=(2,))
+    for algo in ("bc", "gail", "sqil", "iq_learn"):
+        cfg = compose_config([f"algo={algo}", "scale=cpu"]).algo
+        actor = instantiate(cfg.actor)(5, spec)
+        assert sum(p.numel() for p in actor.parameters()) > 0
+        if algo in ("sqil", "iq_learn"):
+            loss = instantiate(cfg.loss)(actor, instantiate(cfg.critic)(5, spec))
+            assert type(loss).__name__ == {"sqil": "SQILLoss", "iq_learn": "IQLearnLoss"}[algo]
+            assert getattr(loss, "num_value_samples", 16) == 16
+
+
+@pytest.mark.parametrize(
+    ("override", "exception", "named"),
+    [
+        ("causal=maybe", ConfigCompositionException, "causal"),
+        ("seed=abc", ConfigCompositionException, "seed"),
+        ("window.mode=fuzzy", ConfigCompositionException, "exact, relaxed"),
+        ("algo.batch_size=many", ConfigCompositionException, "algo.batch_size"),
+        ("algo.unknown_key=1", ConfigCompositionException, "algo.unknown_key"),
+        ("env=atlantis", MissingConfigException, "rovermaze_u"),
+    ],
+)
+def test_a_value_of_the_wrong_type_fails_at_composition(override: str, exception: type, named: str) -> None:
+    with pytest.raises(exception) as error:
+        compose_config([override])
+    message = str(error.value) + "".join(str(cause) for cause in (error.value.__cause__, error.value.__context__) if cause)
+    assert named in message
+
+
+@pytest.mark.parametrize(
+    "override",
+    ["episodes=0", "eval.episodes=0", "eval.final_episodes=0", "eval.num_envs=0", "demos.episodes=0",
+     "algo.num_envs=0", "algo.batch_size=1", "algo.expert_ratio=1.0", "algo.actor.dropout=1.0",
+     "env.confounding_strength=1.5", "env.confounding_strength=-0.1", "env.horizon=0", "window.k=-1", "threads=0",
+     "algo.loss.target_entropy=high", "log_every=0", "collector_workers=0", "collector_workers=3",
+     "algo.random_steps=5001", "device=cuda:999", "device=gpu"],
+)
+def test_an_out_of_range_value_is_refused_by_name(override: str) -> None:
+    key = override.split("=")[0]
+    if key == "episodes":  # not a key: Hydra refuses it outright
+        with pytest.raises(ConfigCompositionException):
+            compose_config([override])
+        return
+    with pytest.raises(ConfigValueError, match=key.replace(".", r"\.")):
+        validate_config(compose_config([override]))
+
+
+def test_enums_of_the_losses_name_their_options() -> None:
+    for algo, override, options in (("iq_learn", "algo.loss.variant=online", "paper, iq_learn"),
+                                    ("gail", "algo.loss.reward=negative", "logit, positive")):
+        with pytest.raises(ConfigCompositionException) as error:
+            compose_config([f"algo={algo}", override])
+        assert options in str(error.value.__cause__)
+    assert compose_config(["algo=gail", "algo.loss.reward=positive"]).algo.loss.reward == "positive"
+
+
+def test_off_policy_counts_must_divide_and_gail_has_no_actor_dropout() -> None:
+    with pytest.raises(ConfigValueError, match=r"collector_workers=3 must divide algo\.num_envs=8"):
+        validate_config(compose_config(["collector_workers=3"]))
+    validate_config(compose_config(["collector_workers=4"]))
+    with pytest.raises(ConfigValueError, match=r"algo\.random_steps=5001 must be a multiple of algo\.frames_per_batch=8"):
+        validate_config(compose_config(["algo.random_steps=5001"]))
+    with pytest.raises(ConfigValueError, match=r"algo\.actor\.dropout must be 0 for GAIL"):
+        validate_config(compose_config(["algo=gail", "algo.actor.dropout=0.05"]))
+    validate_config(compose_config(["algo=sqil", "algo.actor.dropout=0.05"]))  # SQIL's actor keeps Appendix E's
+
+
+def test_booleans_are_booleans() -> None:
+    assert compose_config(["causal=false"]).causal is False
+    assert compose_config(["causal=no"]).causal is False  # YAML 1.1 spelling, converted, never a string
+    assert compose_config(["causal=true"]).causal is True
 
 
 @pytest.mark.parametrize("env", sorted(PAPER_FAMILY))
@@ -70,7 +189,7 @@ def test_scale_paper_is_appendix_e(env: str) -> None:
         for key, value in shared.items():
             assert OmegaConf.select(cfg.algo, key) == value, (env, algo, key)
         for key in FAMILY_KEYS[algo]:
-            assert cfg.algo[key] == facts[key], (env, algo, key)
+            assert OmegaConf.select(cfg.algo, key) == facts[key.split(".")[-1]], (env, algo, key)
         assert cfg.window.k == facts["k"] and cfg.env.horizon == facts["horizon"]
         assert cfg.eval.final_episodes == 1000
 
@@ -80,8 +199,9 @@ def test_scale_cpu_shrinks_budgets_not_objectives() -> None:
         paper = compose_config(["env=rovermaze_medium", f"algo={algo}", "scale=paper"]).algo
         cpu = compose_config(["env=rovermaze_medium", f"algo={algo}", "scale=cpu"]).algo
         assert cpu.actor.hidden < paper.actor.hidden
-        for key in ("gamma", "tau", "alpha_min", "alpha_max", "expert_ratio", "clip_epsilon", "gradient_penalty",
-                    "val_fraction", "huber_delta", "utd_ratio", "value_samples"):
+        for key in ("value_estimator.gamma", "loss.gamma", "target_update.tau", "loss.min_alpha", "loss.max_alpha",
+                    "expert_ratio", "loss.clip_epsilon", "loss.gp_lambda", "val_fraction", "loss.delta", "utd_ratio",
+                    "loss.num_value_samples"):
             assert OmegaConf.select(cpu, key) == OmegaConf.select(paper, key), (algo, key)
     assert compose_config(["algo=sqil"]).algo.total_steps < 2_000_000
 
@@ -91,8 +211,9 @@ def test_overrides_reach_env_window_and_run_dir() -> None:
                           "env.horizon=500", "env.confounding_strength=0.5"])
     assert cfg.run_name == "rovermaze_large/h500-cs0.5-k2/c_iq_learn/seed1"
     assert "h500-cs0.5" in cfg.demos.path
-    env = instantiate(cfg.env.make, regime="deploy", batch_size=(2,), horizon=cfg.env.horizon,
-                      confounding_strength=cfg.env.confounding_strength, seed=0)
+    from torchrl_causal.trainers.builders import make_env
+
+    env = make_env(cfg, "deploy", 2, 0)
     assert (env.horizon, env.confounding_strength, env.regime, env.maze) == (500, 0.5, "deploy", "large")
     matched = compose_config(["window=matched", "causal=false"])
     assert matched.window.window_matched and matched.run_name.split("/")[-2] == "sqil_wm"
@@ -113,8 +234,6 @@ def test_overrides_reach_env_window_and_run_dir() -> None:
 def test_experiments_sweep_the_papers_grids(experiment: str, swept: dict[str, str]) -> None:
     from hydra import compose, initialize_config_dir
 
-    from torchrl_causal.trainers.config import CONFIG_DIR
-
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
         cfg = compose(config_name="config", overrides=[f"experiment={experiment}"], return_hydra_config=True)
     params = {k: str(v) for k, v in cfg.hydra.sweeper.params.items()}
@@ -131,9 +250,9 @@ def test_each_table_row_is_the_run_it_names(row: str) -> None:
     assert cfg.run_name.split("/")[-2] == row
     assert cfg.algo.name == row.removeprefix("c_").removesuffix("_wm")
     if row.endswith("iq_learn_garg"):
-        assert cfg.algo.variant == "iq_learn"
+        assert cfg.algo.loss.variant == "iq_learn"
     elif row.endswith("iq_learn"):
-        assert cfg.algo.variant == "paper"
+        assert cfg.algo.loss.variant == "paper"
 
 
 def test_entry_point_composes_from_any_directory(tmp_path) -> None:
@@ -144,3 +263,11 @@ def test_entry_point_composes_from_any_directory(tmp_path) -> None:
     assert out.returncode == 0, out.stderr[-2000:]
     cfg = OmegaConf.create(out.stdout)
     assert cfg.algo.name == "gail" and cfg.env.name == "route_choice" and cfg.window.k == 0
+
+
+def test_the_demo_runs_validate() -> None:
+    from torchrl_causal.demo import DEMO_ALGOS, DEMO_RUNS, DEMO_SETTINGS
+
+    for task, algo, causal in DEMO_RUNS:
+        validate_config(compose_config(["scale=cpu", *DEMO_SETTINGS[task], f"algo={algo}", *DEMO_ALGOS[algo],
+                                        f"causal={str(causal).lower()}"]))

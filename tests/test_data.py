@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import stat
 from pathlib import Path
 
 import pytest
@@ -61,6 +63,12 @@ def test_metadata_records_the_collection(dataset):
     assert metadata["transitions"] == data.shape[0]
     success = data["next", "success"][data["next", "done"]].float().mean().item()
     assert metadata["expert_success_rate"] == success == 1.0
+
+
+def test_dataset_directory_gets_the_umask_mode(dataset):
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(dataset.stat().st_mode) == 0o777 & ~umask  # not mkdtemp's private 0700
 
 
 def test_seed_reproduces_the_dataset(dataset, tmp_path):

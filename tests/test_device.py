@@ -12,6 +12,7 @@ import os
 import shutil
 import subprocess
 import sys
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -20,12 +21,14 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule
 from torchrl.data import Bounded
 
-from test_trainers import tiny_config
+from test_trainers import build_trainer, tiny_config
+from torchrl.objectives import SoftUpdate
+from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.runs import read_scalar_csv
 from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
 from torchrl_causal.objectives import IQLearnLoss
-from torchrl_causal.trainers import OffPolicyILTrainer, Trainer, make_trainer
-from torchrl_causal.trainers.builders import make_env, make_window
+from torchrl_causal.train import run
+from torchrl_causal.trainers import Trainer
 from torchrl_causal.trainers.device import PolicyOnDevice, for_cpu_env, resolve_device
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
@@ -33,9 +36,9 @@ DEVICES = ["cpu", *(["cuda"] if torch.cuda.is_available() else [])]
 REPO = Path(__file__).resolve().parents[1]
 
 
-def set_up(trainer: Trainer) -> Trainer:
-    """What :meth:`Trainer.fit` does before its loop, without writing run files."""
-    trainer.window = make_window(trainer.cfg, make_env(trainer.cfg, "train", 1, int(trainer.cfg.seed)))
+def set_up(cfg) -> Trainer:
+    """The trainer of ``cfg`` as :meth:`Trainer.fit` has it before its loop."""
+    trainer = build_trainer(cfg)
     trainer.setup()
     return trainer
 
@@ -93,7 +96,7 @@ def test_resolve_device_refuses_devices_this_machine_lacks() -> None:
 def test_trainer_refuses_a_missing_device_before_writing(tmp_path: Path) -> None:
     cfg = tiny_config(tmp_path, "route_choice", "bc", True, "device=cuda:999")
     with pytest.raises(ValueError, match="device='cuda:999'"):
-        make_trainer(cfg).fit()
+        run(cfg)
     assert list(tmp_path.iterdir()) == []
 
 
@@ -115,7 +118,7 @@ def test_cli_refuses_a_missing_device_before_hydra_makes_the_run_directory(tmp_p
 @pytest.mark.parametrize("device", DEVICES)
 def test_off_policy_placement_of_every_parameter_and_sampled_batch(tmp_path: Path, device: str) -> None:
     cfg = tiny_config(tmp_path, "rovermaze_u", "iq_learn", True, f"device={device}")
-    trainer = set_up(OffPolicyILTrainer(cfg))
+    trainer = set_up(cfg)
     target = resolve_device(device)
     assert trainer.device == target
     while trainer.update.updates == 0:  # through the random phase into the first updates
@@ -128,12 +131,13 @@ def test_off_policy_placement_of_every_parameter_and_sampled_batch(tmp_path: Pat
     assert_on(target, batch_tensors(trainer.expert_buffer.sample()))
     assert_on(target, batch_tensors(trainer.policy_buffer.sample()))
     assert_on(target, batch_tensors(next(trainer.batches)))  # the collector stores on the device
-    assert trainer.evaluate("train", 2, 0).n_episodes == 2  # the evaluation env steps on the CPU
+    # The evaluation env steps on the CPU.
+    assert Evaluator(cfg, trainer.window).evaluate(trainer.policy, "train", 2, 0).n_episodes == 2
 
     # A checkpoint loads onto the device, the replay buffer's storage included.
     state = trainer.state_dict()
     trainer.close()
-    resumed = set_up(OffPolicyILTrainer(cfg))
+    resumed = set_up(cfg)
     resumed.load_state_dict(state)
     assert resumed.update.updates == trainer.update.updates
     assert_on(target, module_tensors(resumed.loss))
@@ -146,15 +150,16 @@ def test_off_policy_placement_of_every_parameter_and_sampled_batch(tmp_path: Pat
 @pytest.mark.parametrize("device", DEVICES)
 def test_bc_and_gail_placement(tmp_path: Path, device: str) -> None:
     target = resolve_device(device)
-    bc = set_up(make_trainer(tiny_config(tmp_path, "rovermaze_u", "bc", True, f"device={device}")))
+    bc = set_up(tiny_config(tmp_path, "rovermaze_u", "bc", True, f"device={device}"))
     bc.train_step()
     assert_on(target, module_tensors(bc.loss))
     assert_on(target, optimizer_tensors(bc.optimizer))
     assert_on(target, {**batch_tensors(bc.train_data), **batch_tensors(bc.val_data)})
-    gail = set_up(make_trainer(tiny_config(tmp_path, "rovermaze_u", "gail", True, f"device={device}")))
+    gail = set_up(tiny_config(tmp_path, "rovermaze_u", "gail", True, f"device={device}"))
     gail.train_step()
     assert_on(target, {**module_tensors(gail.losses.policy), **module_tensors(gail.losses.discriminator)})
-    assert_on(target, {**optimizer_tensors(gail.policy_optimizer), **optimizer_tensors(gail.discriminator_optimizer)})
+    assert_on(target, {**optimizer_tensors(gail.actor_optimizer), **optimizer_tensors(gail.critic_optimizer),
+                       **optimizer_tensors(gail.discriminator_optimizer)})
     assert_on(target, batch_tensors(gail.expert))
     gail.close()
 
@@ -182,7 +187,7 @@ _READS = ("item", "tolist", "__bool__", "__float__", "__int__", "__index__")
 def test_update_loop_reads_nothing_back_from_tensors(tmp_path: Path, monkeypatch) -> None:
     """Between logs, the trainer's own code converts no tensor to a Python value (on a
     GPU each such read would wait for the device)."""
-    trainer = set_up(OffPolicyILTrainer(tiny_config(tmp_path, "rovermaze_u", "sqil", True, "log_every=1000")))
+    trainer = set_up(tiny_config(tmp_path, "rovermaze_u", "sqil", True, "log_every=1000"))
     while trainer.progress < int(trainer.cfg.algo.random_steps):
         trainer.train_step()
     trainers_dir = str(REPO / "torchrl_causal" / "trainers")
@@ -217,7 +222,7 @@ def test_losses_are_averaged_on_device_and_logged_every_n_updates(tmp_path: Path
     monkeypatch.setattr(ActorCriticUpdate, "__call__", recording)
     # 80 random steps, then 10 updates per 40-step collector batch up to 240 steps.
     cfg = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "log_every=15")
-    OffPolicyILTrainer(cfg).fit()
+    run(cfg)
     scalars = Path(cfg.run_dir) / "logs" / "scalars" / "train"
     assert len(recorded) == 40
     # 20 updates by step 160 (>= 15: logged), 10 more by 200 (not), 20 by 240 (logged, the end).
@@ -248,8 +253,11 @@ def _iq_learn_update(compile: bool) -> ActorCriticUpdate:
     loss = IQLearnLoss(make_tanh_gaussian_actor(3, spec, hidden=16, num_blocks=1, dropout=0.05),
                        make_qvalue_network(3, spec, hidden=16, num_blocks=1), num_value_samples=2)
     loss.make_value_estimator(gamma=0.99)
-    return ActorCriticUpdate(loss, lr_actor=1e-2, lr_critic=1e-2, lr_alpha=1e-2, max_grad_norm=1.0, tau=0.1,
-                             cosine_updates=5, compile=compile)
+    adam = partial(torch.optim.Adam, lr=1e-2)
+    return ActorCriticUpdate(loss, actor_optimizer=adam, critic_optimizer=adam, alpha_optimizer=adam,
+                             target_update=partial(SoftUpdate, tau=0.1), max_grad_norm=1.0,
+                             critic_scheduler=torch.optim.lr_scheduler.CosineAnnealingLR, cosine_updates=5,
+                             compile=compile)
 
 
 def _batches(count: int) -> list[TensorDict]:
@@ -293,7 +301,7 @@ def test_multi_process_collection_uses_the_current_policy(tmp_path: Path) -> Non
     workers act with the new weights."""
     cfg = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "collector_workers=2", "algo.random_steps=40",
                       "algo.total_steps=120")
-    trainer = set_up(OffPolicyILTrainer(cfg))
+    trainer = set_up(cfg)
     trainer.train_step()  # the random phase: one 40-step batch, 20 steps from each worker's env
     assert trainer.progress == 40 and len(trainer.policy_buffer) == 40
     first, second = trainer.policy_buffer[:20], trainer.policy_buffer[20:40]
@@ -318,7 +326,7 @@ def test_a_run_from_a_missing_device_evaluates_on_the_cpu(tmp_path: Path) -> Non
     from torchrl_causal.evaluate import evaluate_run
 
     cfg = tiny_config(tmp_path, "route_choice", "bc", True)
-    make_trainer(cfg).fit()
+    run(cfg)
     config_file = Path(cfg.run_dir) / "config.yaml"
     saved = OmegaConf.load(config_file)
     saved.device = "cuda:999"  # as if trained on a GPU this machine lacks

@@ -9,9 +9,10 @@ from pathlib import Path
 
 import pytest
 import torch
-from test_trainers import tiny_config
+from test_trainers import build_trainer, tiny_config
 
-from torchrl_causal.trainers import make_trainer
+from torchrl_causal.train import run
+from torchrl_causal.trainers import ConfigValueError, off_policy
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
@@ -21,20 +22,22 @@ COUNTS = ["algo.utd_ratio=0.3", "algo.random_steps=12", "algo.total_steps=60", "
           "algo.num_envs=2", "algo.eval_every=1000"]
 
 
-def _record_actor_calls(trainer, calls: list) -> None:
-    """Records (batch rows, training mode) of every actor forward pass once the trainer has built it."""
-    setup = trainer.setup
+def _record_actor_calls(monkeypatch, calls: list) -> None:
+    """Records (batch rows, training mode) of every forward pass of the actor the
+    off-policy trainer builds, from the moment it is built (the collector probes it in setup)."""
+    make_policy = off_policy.make_policy
 
-    def setup_and_hook():
-        setup()
-        trainer.policy.module[0].register_forward_pre_hook(  # the network: losses call it through get_dist
+    def make_and_hook(cfg, env):
+        actor = make_policy(cfg, env)
+        actor.module[0].register_forward_pre_hook(  # the network: losses call it through get_dist
             lambda module, args: calls.append((args[0].shape[0] if args[0].batch_dims else 1, module.training)))
+        return actor
 
-    trainer.setup = setup_and_hook
+    monkeypatch.setattr(off_policy, "make_policy", make_and_hook)
 
 
 def test_off_policy_counts_are_exact_and_the_cosine_schedule_ends_with_the_run(tmp_path: Path, monkeypatch) -> None:
-    trainer = make_trainer(tiny_config(tmp_path, "rovermaze_u", "sqil", True, *COUNTS))
+    trainer = build_trainer(tiny_config(tmp_path, "rovermaze_u", "sqil", True, *COUNTS))
     learning_rates, calls = [], []
     step = ActorCriticUpdate.__call__
 
@@ -43,10 +46,10 @@ def test_off_policy_counts_are_exact_and_the_cosine_schedule_ends_with_the_run(t
         return step(update, batch)
 
     monkeypatch.setattr(ActorCriticUpdate, "__call__", spy)
-    _record_actor_calls(trainer, calls)
+    _record_actor_calls(monkeypatch, calls)
     trainer.fit()
     assert trainer.update.updates == trainer.update.cosine_updates == 14 == len(learning_rates)
-    lr = float(trainer.cfg.algo.lr_critic)
+    lr = trainer.cfg.algo.critic_optimizer.lr
     expected = [lr * (1 + math.cos(math.pi * i / 14)) / 2 for i in range(14)]
     assert learning_rates == pytest.approx(expected) and min(learning_rates) > 0
     # The collector's env has 2 envs: the policy acts at the (60 - 12) / 2 vectorised steps
@@ -58,15 +61,16 @@ def test_off_policy_counts_are_exact_and_the_cosine_schedule_ends_with_the_run(t
 
 
 def test_random_steps_must_be_whole_collector_batches(tmp_path: Path) -> None:
-    trainer = make_trainer(tiny_config(tmp_path, "rovermaze_u", "sqil", True, *COUNTS, "algo.random_steps=10"))
-    with pytest.raises(ValueError, match="algo.random_steps=10 must be a multiple of algo.frames_per_batch=6"):
-        trainer.fit()
+    cfg = tiny_config(tmp_path, "rovermaze_u", "sqil", True, *COUNTS, "algo.random_steps=10")
+    with pytest.raises(ConfigValueError, match="algo.random_steps=10 must be a multiple of algo.frames_per_batch=6"):
+        run(cfg)
+    assert list(tmp_path.iterdir()) == []  # refused before the run directory exists
 
 
 @pytest.mark.parametrize("algo", ["sqil", "iq_learn"])
 def test_absorbing_states_reach_both_replay_buffers(tmp_path: Path, algo: str) -> None:
     # Every Route Choice episode ends after one terminal step: half of all rows are absorbing.
-    trainer = make_trainer(tiny_config(tmp_path, "route_choice", algo, True, "algo.absorbing=true"))
+    trainer = build_trainer(tiny_config(tmp_path, "route_choice", algo, True, "algo.loss.absorbing=true"))
     trainer.fit()
     assert trainer.loss.absorbing
     for buffer in (trainer.expert_buffer, trainer.policy_buffer):
@@ -77,15 +81,16 @@ def test_absorbing_states_reach_both_replay_buffers(tmp_path: Path, algo: str) -
 
 
 def test_gail_refuses_actor_dropout(tmp_path: Path) -> None:
-    trainer = make_trainer(tiny_config(tmp_path, "route_choice", "gail", True, "algo.actor.dropout=0.05"))
-    with pytest.raises(ValueError, match="algo.actor.dropout must be 0 for GAIL"):
-        trainer.fit()
+    cfg = tiny_config(tmp_path, "route_choice", "gail", True, "algo.actor.dropout=0.05")
+    with pytest.raises(ConfigValueError, match="algo.actor.dropout must be 0 for GAIL"):
+        run(cfg)
+    assert list(tmp_path.iterdir()) == []  # refused before the run directory exists
 
 
 @pytest.mark.parametrize("absorbing", [False, True])
 def test_gail_ppo_ratio_is_one_before_the_first_update(tmp_path: Path, absorbing: bool) -> None:
-    trainer = make_trainer(tiny_config(tmp_path, "rovermaze_u", "gail", False, "algo.rounds=1",
-                                       f"algo.absorbing={str(absorbing).lower()}"))
+    trainer = build_trainer(tiny_config(tmp_path, "rovermaze_u", "gail", False, "algo.rounds=1",
+                                        f"algo.loss.absorbing={str(absorbing).lower()}"))
     ratios = {}
     update = trainer._update_policy
     discriminator_update = trainer._update_discriminator

@@ -1,41 +1,66 @@
 """End-to-end runs of every trainer on RoverMaze-U and Route Choice at toy budgets: the
-loop runs, checkpoints atomically, resumes to the saved state, evaluates and reports."""
+loop runs, checkpoints, resumes exactly after an interrupt, refuses a changed config,
+evaluates and reports."""
 
 from __future__ import annotations
 
 import json
+import random
+import signal
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
 import torch
+from hydra.utils import get_class
 from omegaconf import OmegaConf
+from tensordict import MemoryMappedTensor, TensorDict
 
 from torchrl_causal.evaluation import load_runs, write_report
+from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.runs import read_scalar_csv
 from torchrl_causal.graphs.window import AdjustmentWindow
-from torchrl_causal.trainers import BCTrainer, CheckpointError, OffPolicyILTrainer, compose_config, load_checkpoint, make_trainer
+from torchrl_causal.train import run
+from torchrl_causal.trainers import (
+    CheckpointError,
+    ConfigMismatchError,
+    ConfigValueError,
+    RunDirectory,
+    RunInterrupted,
+    Trainer,
+    compose_config,
+    load_checkpoint,
+)
+from torchrl_causal.trainers.builders import make_window
 
 TINY = [
     "progress_bar=false", "threads=1", "demos.episodes=6", "eval.episodes=4", "eval.num_envs=4",
     "eval.final_episodes=8", "eval.trajectories=2",
 ]
 ALGO_TINY = {
-    "bc": ["algo.actor.hidden=16", "algo.actor.blocks=1", "algo.epochs=3", "algo.batch_size=64", "algo.eval_every=2"],
-    "gail": ["algo.actor.hidden=16", "algo.actor.blocks=1", "algo.value.hidden=16", "algo.discriminator.hidden=16",
+    "bc": ["algo.actor.hidden=16", "algo.actor.num_blocks=1", "algo.epochs=3", "algo.batch_size=64", "algo.eval_every=2"],
+    "gail": ["algo.actor.hidden=16", "algo.actor.num_blocks=1", "algo.value.hidden=16", "algo.discriminator.hidden=16",
              "algo.rounds=2", "algo.episodes_per_round=2", "algo.batch_size=32", "algo.discriminator_batch_size=32",
              "algo.eval_every=1"],
-    "sqil": ["algo.actor.hidden=16", "algo.actor.blocks=1", "algo.critic.hidden=16", "algo.critic.blocks=1",
+    "sqil": ["algo.actor.hidden=16", "algo.actor.num_blocks=1", "algo.critic.hidden=16", "algo.critic.num_blocks=1",
              "algo.total_steps=240", "algo.random_steps=80", "algo.num_envs=2", "algo.frames_per_batch=40",
              "algo.batch_size=32", "algo.buffer_size=1000", "algo.eval_every=120"],
     "expert": [],
 }
-ALGO_TINY["iq_learn"] = ALGO_TINY["sqil"] + ["algo.value_samples=2"]
+ALGO_TINY["iq_learn"] = ALGO_TINY["sqil"] + ["algo.loss.num_value_samples=2"]
 ENV_TINY = {"rovermaze_u": ["env=rovermaze_u", "env.horizon=40", "window.k=2"], "route_choice": ["env=route_choice"]}
 
 
 def tiny_config(root: Path, env: str, algo: str, causal: bool, *extra: str):
     return compose_config([*ENV_TINY[env], f"algo={algo}", f"causal={causal}", f"run_root={root}", *TINY,
                            *ALGO_TINY[algo], *extra])
+
+
+def build_trainer(cfg) -> Trainer:
+    """The trainer :func:`~torchrl_causal.train.run` builds for ``cfg``, not yet set up,
+    for tests that look inside it (``fit()`` writes to ``cfg.run_dir``)."""
+    window = make_window(cfg)
+    return get_class(cfg.algo.trainer)(cfg, RunDirectory(cfg.run_dir), window, Evaluator(cfg, window).periodic)
 
 
 @pytest.fixture(scope="module")
@@ -46,8 +71,8 @@ def trained_runs(tmp_path_factory) -> dict[str, Path]:
         root = tmp_path_factory.mktemp(env)
         for algo in ("bc", "gail", "sqil", "iq_learn"):
             for causal in (True, False):
-                make_trainer(tiny_config(root, env, algo, causal)).fit()
-        make_trainer(tiny_config(root, env, "expert", False)).fit()
+                run(tiny_config(root, env, algo, causal))
+        run(tiny_config(root, env, "expert", False))
         roots[env] = root
     return roots
 
@@ -57,25 +82,28 @@ def test_every_algorithm_runs_checkpoints_and_evaluates(trained_runs, env: str) 
     runs = load_runs(trained_runs[env])
     assert sorted(r.label for r in runs) == sorted(
         ["expert", "c_bc", "c_gail", "c_sqil", "c_iq_learn", "bc", "gail", "sqil", "iq_learn"])
-    for run in runs:
-        status = json.loads((run.path / "status.json").read_text())
+    for record in runs:
+        status = json.loads((record.path / "status.json").read_text())
         assert status["status"] == "complete"
-        assert status["progress"] == status["total"] or run.label.endswith("bc")  # BC may stop early
+        assert status["progress"] == status["total"] or record.label.endswith("bc")  # BC may stop early
         for regime in ("train", "deploy"):
-            result = run.evaluations[regime]
+            result = record.evaluations[regime]
             assert result.n_episodes == 8 and len(result.returns) == 8
             assert all(1 <= n <= (40 if env == "rovermaze_u" else 1) for n in result.lengths)
-        config = (run.path / "config.yaml").read_text()
-        assert "${" not in config and OmegaConf.create(config).run_dir == str(run.path)  # resolved
-        if run.label == "expert":
-            assert not (run.path / "checkpoints").exists()
+        config = (record.path / "config.yaml").read_text()
+        assert "${" not in config and OmegaConf.create(config).run_dir == str(record.path)  # resolved
+        assert "train-regime return" in (record.path / "train.log").read_text() or record.label == "expert"
+        if record.label == "expert":
+            assert not (record.path / "checkpoints").exists()
             continue
-        window = AdjustmentWindow.from_dict(json.loads((run.path / "window.json").read_text()))
-        assert ("W" in window.lags) != run.label.startswith("c_")  # the collider is what causal runs drop
+        window = AdjustmentWindow.from_dict(json.loads((record.path / "window.json").read_text()))
+        assert ("W" in window.lags) != record.label.startswith("c_")  # the collider is what causal runs drop
         for name in ("last.pt", "best.pt"):
-            state = load_checkpoint(run.path / "checkpoints" / name)  # weights_only=True
+            state = load_checkpoint(record.path / "checkpoints" / name)  # weights_only=True
             assert state["progress"] <= status["total"]
-        assert run.curve and run.curve[-1][0] == status["progress"]
+        assert record.curve and record.curve[-1][0] == status["progress"]
+        # A finished run whose cosine schedule spans its budget cannot continue: its buffer goes.
+        assert not (record.path / "replay").exists()
     if env == "rovermaze_u":
         deploy = next(r for r in runs if r.label == "c_sqil").evaluations["deploy"]
         assert len(deploy.trajectories) == 2 and len(deploy.trajectories[0][0]) == 2
@@ -93,86 +121,188 @@ def test_report_of_trained_runs(trained_runs, tmp_path: Path) -> None:
 def test_finished_run_is_not_retrained(trained_runs) -> None:
     cfg = tiny_config(trained_runs["route_choice"], "route_choice", "bc", True)
     before = (Path(cfg.run_dir) / "eval" / "deploy.json").stat().st_mtime_ns
-    results = make_trainer(cfg).fit()
+    results = run(cfg)
     assert results["deploy"].n_episodes == 8
     assert (Path(cfg.run_dir) / "eval" / "deploy.json").stat().st_mtime_ns == before
 
 
+@pytest.mark.parametrize("change", ["env.make.maze=medium", "algo.optimizer.lr=0.01", "algo.actor.hidden=32",
+                                    "window.mode=exact", "eval.final_episodes=9"])
+def test_a_changed_config_is_refused_naming_the_key(trained_runs, change: str) -> None:
+    cfg = tiny_config(trained_runs["rovermaze_u"], "rovermaze_u", "bc", True, change)
+    config_file = Path(cfg.run_dir) / "config.yaml"
+    stored = config_file.read_text()  # the finished run's: the change does not alter the run's name
+    with pytest.raises(ConfigMismatchError, match=change.split("=")[0].replace(".", r"\.")):
+        run(cfg)
+    assert config_file.read_text() == stored
+
+
+def test_a_changed_setting_in_the_run_name_gets_its_own_directory(trained_runs) -> None:
+    cfg = tiny_config(trained_runs["rovermaze_u"], "rovermaze_u", "bc", True, "env.confounding_strength=0.5")
+    assert not Path(cfg.run_dir).exists() and "cs0.5" in cfg.run_dir
+
+
+def test_an_unfinished_run_refuses_a_changed_width_before_writing(tmp_path: Path) -> None:
+    cfg = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "algo.total_steps=400")
+    with _interrupt_at(get_class(cfg.algo.trainer), 2), pytest.raises(RunInterrupted):
+        run(cfg)
+    config_file = Path(cfg.run_dir) / "config.yaml"
+    stored, checkpoint = config_file.read_text(), (Path(cfg.run_dir) / "checkpoints" / "last.pt").read_bytes()
+    with pytest.raises(ConfigMismatchError, match=r"algo\.critic\.hidden: 16 -> 32"):
+        run(tiny_config(tmp_path, "rovermaze_u", "sqil", True, "algo.total_steps=400", "algo.critic.hidden=32"))
+    assert config_file.read_text() == stored
+    assert (Path(cfg.run_dir) / "checkpoints" / "last.pt").read_bytes() == checkpoint
+
+
+def test_resume_false_discards_the_previous_run(trained_runs, tmp_path: Path) -> None:
+    cfg = tiny_config(tmp_path, "route_choice", "bc", True)
+    run(cfg)
+    (Path(cfg.run_dir) / "stale").write_text("")
+    run(tiny_config(tmp_path, "route_choice", "bc", True, "algo.optimizer.lr=0.01", "resume=false"))
+    assert not (Path(cfg.run_dir) / "stale").exists()
+    assert OmegaConf.load(Path(cfg.run_dir) / "config.yaml").algo.optimizer.lr == 0.01
+
+
 def test_raising_the_budget_continues_a_finished_run(tmp_path: Path) -> None:
-    make_trainer(tiny_config(tmp_path, "route_choice", "gail", True)).fit()
-    longer = make_trainer(tiny_config(tmp_path, "route_choice", "gail", True, "algo.rounds=4"))
-    longer.fit()
-    status = json.loads((Path(longer.cfg.run_dir) / "status.json").read_text())
+    run(tiny_config(tmp_path, "route_choice", "gail", True))
+    longer = tiny_config(tmp_path, "route_choice", "gail", True, "algo.rounds=4")
+    run(longer)
+    status = json.loads((Path(longer.run_dir) / "status.json").read_text())
     assert (status["status"], status["progress"], status["total"]) == ("complete", 4, 4)
-    assert [step for step, _ in read_scalar_csv(Path(longer.cfg.run_dir) / "logs/scalars/eval/train_return.csv")] == [1, 2, 3, 4]
+    assert [step for step, _ in read_scalar_csv(Path(longer.run_dir) / "logs/scalars/eval/train_return.csv")] == [1, 2, 3, 4]
 
 
-class _Interrupted(Exception):
-    pass
+def test_out_of_range_values_fail_before_a_run_directory_exists(tmp_path: Path, monkeypatch) -> None:
+    for change in ("eval.final_episodes=0", "demos.episodes=0", "algo.num_envs=0", "env.confounding_strength=1.5"):
+        with pytest.raises(ConfigValueError, match=change.split("=")[0].replace(".", r"\.")):
+            run(tiny_config(tmp_path, "rovermaze_u", "sqil", True, change))
+    assert not (tmp_path / "rovermaze_u").exists()
+    # A failure after the directory was claimed but before any checkpoint leaves nothing either.
+    import torchrl_causal.train as train_module
+
+    def broken_window(cfg):
+        raise RuntimeError("no window")
+
+    monkeypatch.setattr(train_module, "make_window", broken_window)
+    with pytest.raises(RuntimeError, match="no window"):
+        run(tiny_config(tmp_path, "rovermaze_u", "sqil", True))
+    assert not (tmp_path / "rovermaze_u").exists()
 
 
-def _interrupt_after_checkpoints(trainer, count: int) -> None:
-    """Makes the trainer raise right after its ``count``-th checkpoint, like a killed job."""
-    save = trainer.save_checkpoint
-    calls = []
+@contextmanager
+def _interrupt_at(trainer_class, step: int):
+    """Sends SIGINT to this process at the end of the ``step``-th training iteration, as
+    Ctrl-C would (the trainer's handler must let the iteration finish)."""
+    original, calls = trainer_class.train_step, []
 
-    def save_then_maybe_die() -> None:
-        save()
+    def train_step(trainer):
+        scalars = original(trainer)
         calls.append(1)
-        if len(calls) == count:
-            raise _Interrupted
+        if len(calls) == step:
+            signal.raise_signal(signal.SIGINT)
+        return scalars
 
-    trainer.save_checkpoint = save_then_maybe_die
-
-
-def test_bc_resume_is_exact(tmp_path: Path) -> None:
-    extra = ("algo.epochs=4", "algo.patience=10", "algo.eval_every=3")
-    straight = BCTrainer(tiny_config(tmp_path / "a", "rovermaze_u", "bc", True, *extra))
-    straight.fit()
-    interrupted = BCTrainer(tiny_config(tmp_path / "b", "rovermaze_u", "bc", True, *extra))
-    _interrupt_after_checkpoints(interrupted, 2)
-    with pytest.raises(_Interrupted):
-        interrupted.fit()
-    assert load_checkpoint(Path(interrupted.cfg.run_dir) / "checkpoints" / "last.pt")["progress"] == 2
-    resumed = BCTrainer(tiny_config(tmp_path / "b", "rovermaze_u", "bc", True, *extra))
-    resumed.fit()
-    for (name, a), (_, b) in zip(straight.loss.named_parameters(), resumed.loss.named_parameters()):
-        assert torch.equal(a, b), name
-    curve_a = read_scalar_csv(Path(straight.cfg.run_dir) / "logs/scalars/train/loss_bc.csv")
-    curve_b = read_scalar_csv(Path(resumed.cfg.run_dir) / "logs/scalars/train/loss_bc.csv")
-    assert curve_a == curve_b and [s for s, _ in curve_b] == [1, 2, 3, 4]
+    trainer_class.train_step = train_step
+    try:
+        yield
+    finally:
+        trainer_class.train_step = original
 
 
-def test_off_policy_resume_restores_the_saved_state(tmp_path: Path) -> None:
-    cfg = tiny_config(tmp_path, "rovermaze_u", "sqil", True)
-    first = OffPolicyILTrainer(cfg)
-    _interrupt_after_checkpoints(first, 1)
-    with pytest.raises(_Interrupted):
-        first.fit()
-    saved = load_checkpoint(Path(cfg.run_dir) / "checkpoints" / "last.pt")
-    assert saved["progress"] == 120 and saved["training"]["updates"] == 10  # (120 - 80) * 0.25
+def _assert_same_state(a, b, where: str = "") -> None:
+    if isinstance(a, dict):
+        assert a.keys() == b.keys(), where
+        for key in a:
+            _assert_same_state(a[key], b[key], f"{where}/{key}")
+    elif isinstance(a, torch.Tensor):
+        assert torch.equal(a, b), where
+    elif isinstance(a, (list, tuple)):
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _assert_same_state(x, y, f"{where}[{i}]")
+    else:
+        assert a == b, where
 
-    second = OffPolicyILTrainer(tiny_config(tmp_path, "rovermaze_u", "sqil", True))
-    second.window = first.window
-    second.setup()
-    assert second._resume()
-    assert second.progress == 120 and second.update.updates == 10 and len(second.policy_buffer) == 120
-    for key, value in first.loss.state_dict().items():
-        assert torch.equal(second.loss.state_dict()[key], value), key
-    assert second.update.critic_optimizer.param_groups[0]["lr"] == first.update.critic_optimizer.param_groups[0]["lr"] < 3e-4
-    torch.testing.assert_close(second.policy_buffer[:120]["observation"], first.policy_buffer[:120]["observation"])
-    results = OffPolicyILTrainer(tiny_config(tmp_path, "rovermaze_u", "sqil", True)).fit()
-    assert json.loads((Path(cfg.run_dir) / "status.json").read_text())["progress"] == 240
-    assert results["deploy"].n_episodes == 8
+
+EXACT = {"sqil": ("algo.total_steps=320", "algo.eval_every=160"), "gail": ("algo.rounds=3", "algo.eval_every=2"),
+         "bc": ("algo.epochs=4", "algo.patience=10")}
+
+
+@pytest.mark.parametrize("algo", sorted(EXACT))
+def test_interrupt_at_a_random_step_then_resume_equals_an_uninterrupted_run(tmp_path: Path, algo: str) -> None:
+    extra = (*EXACT[algo], "checkpoint_every_s=3600")  # no timed checkpoint: only the interrupt's
+    straight = tiny_config(tmp_path / "a", "rovermaze_u", algo, True, *extra)
+    results_a = run(straight)
+    interrupted = tiny_config(tmp_path / "b", "rovermaze_u", algo, True, *extra)
+    trainer_class = get_class(interrupted.algo.trainer)
+    iterations = trainer_class.budget(interrupted) // {"sqil": 40, "gail": 1, "bc": 1}[algo]
+    step = random.Random(f"{algo}-resume").randint(1, iterations - 1)
+    with _interrupt_at(trainer_class, step), pytest.raises(RunInterrupted, match="interrupted by SIGINT") as stop:
+        run(interrupted)
+    assert stop.value.exit_code == 130
+    run_dir = RunDirectory(interrupted.run_dir)
+    assert run_dir.read_status()["status"] == "interrupted"
+    assert not run_dir.eval_path("deploy").exists()
+    results_b = run(tiny_config(tmp_path / "b", "rovermaze_u", algo, True, *extra))
+    a, b = (load_checkpoint(Path(cfg.run_dir) / "checkpoints" / "last.pt") for cfg in (straight, interrupted))
+    for part in ("collector",):  # trajectory ids are renumbered on load; nothing reads them
+        for state in (a, b):
+            state["training"].pop(part, None)
+    _assert_same_state(a, b)
+    _assert_same_state(*(load_checkpoint(Path(cfg.run_dir) / "checkpoints" / "best.pt") for cfg in (straight, interrupted)))
+    assert results_a["deploy"].returns == results_b["deploy"].returns
+    curves = [read_scalar_csv(Path(cfg.run_dir) / "logs/scalars/eval/train_return.csv") for cfg in (straight, interrupted)]
+    assert curves[0] == curves[1]
+    # Every logged scalar too: losses averaged on the device across the interrupt included.
+    logs = [{path.relative_to(Path(cfg.run_dir)): read_scalar_csv(path)
+             for path in (Path(cfg.run_dir) / "logs/scalars").rglob("*.csv")} for cfg in (straight, interrupted)]
+    assert logs[0] == logs[1] and len(logs[0]) > 2
+
+
+def test_replay_buffer_lives_in_the_run_directory_not_in_the_checkpoint(tmp_path: Path) -> None:
+    cfg = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "algo.total_steps=400", "algo.buffer_size=400",
+                      "checkpoint_every_s=0")
+    with _interrupt_at(get_class(cfg.algo.trainer), 6), pytest.raises(RunInterrupted):
+        run(cfg)
+    run_dir = RunDirectory(cfg.run_dir)
+    checkpoint = load_checkpoint(run_dir.last_checkpoint)
+    assert checkpoint["progress"] == 240 and checkpoint["training"]["policy_buffer_len"] == 240
+    stored = TensorDict.load_memmap(run_dir.replay_dir / "storage")  # what resume maps back
+    assert stored.shape == (400,) and isinstance(stored["observation"], MemoryMappedTensor)
+    assert stored["observation"][:240].abs().sum(-1).gt(0).all() and not stored["observation"][240:].any()
+    assert all(not isinstance(v, torch.Tensor) or v.shape[:1] != (400,) for v in _leaves(checkpoint["training"]))
+
+
+def _leaves(state):
+    if isinstance(state, dict):
+        for value in state.values():
+            yield from _leaves(value)
+    else:
+        yield state
+
+
+def test_checkpoints_follow_the_clock(tmp_path: Path) -> None:
+    counts = {}
+    for every in (0, 3600):
+        cfg = tiny_config(tmp_path / str(every), "rovermaze_u", "bc", True, "algo.epochs=4", "algo.patience=10",
+                          "algo.eval_every=4", f"checkpoint_every_s={every}")
+        trainer_class = get_class(cfg.algo.trainer)
+        original, saves = trainer_class.save_checkpoint, []
+        trainer_class.save_checkpoint = lambda self: (saves.append(self.progress), original(self))
+        try:
+            run(cfg)
+        finally:
+            trainer_class.save_checkpoint = original
+        counts[every] = saves
+    assert counts[0] == [1, 2, 3, 4] and counts[3600] == [4]  # every epoch, or only at the evaluation
 
 
 def test_corrupted_checkpoint_is_refused_by_name(tmp_path: Path) -> None:
     cfg = tiny_config(tmp_path, "route_choice", "bc", True)
+    run(cfg)
     last = Path(cfg.run_dir) / "checkpoints" / "last.pt"
-    last.parent.mkdir(parents=True)
     last.write_bytes(b"not a checkpoint")
     with pytest.raises(CheckpointError, match="last.pt"):
-        make_trainer(cfg).fit()
+        run(tiny_config(tmp_path, "route_choice", "bc", True, "algo.epochs=5"))
 
 
 def test_route_choice_bc_reproduces_the_appendix_values(tmp_path: Path) -> None:
@@ -182,22 +312,28 @@ def test_route_choice_bc_reproduces_the_appendix_values(tmp_path: Path) -> None:
              "eval.final_episodes=4000", "eval.num_envs=1000")
     expected = {True: (3 / 4, 3 / 4), False: (11 / 16, 19 / 48)}
     for causal, (train_value, deploy_value) in expected.items():
-        results = make_trainer(tiny_config(tmp_path, "route_choice", "bc", causal, *extra)).fit()
+        results = run(tiny_config(tmp_path, "route_choice", "bc", causal, *extra))
         for regime, value in (("train", train_value), ("deploy", deploy_value)):
             result = results[regime]
             assert abs(result.return_mean - value) < 4 * result.success_se + 1e-9, (causal, regime, result.return_mean)
 
 
-def test_evaluate_cli_reloads_best_policy(trained_runs) -> None:
+def test_evaluate_cli_writes_its_own_record(trained_runs) -> None:
     from torchrl_causal.evaluate import main as evaluate_main
 
     root = trained_runs["rovermaze_u"]
     for label in ("c_sqil", "expert"):
-        (run,) = [r for r in load_runs(root) if r.label == label]
-        result = evaluate_main([f"run_dir={run.path}", "regime=deploy", "episodes=6", "num_envs=3",
+        (record,) = [r for r in load_runs(root) if r.label == label]
+        final = (record.path / "eval" / "deploy.json").read_bytes()
+        result = evaluate_main([f"run_dir={record.path}", "regime=deploy", "episodes=6", "num_envs=3",
                                 "confounding_strength=0.5"])
         assert result.n_episodes == 6 and result.regime == "deploy"
-        assert (run.path / "eval" / "deploy-cs0.5.json").is_file()
-    assert len(load_runs(root)) == 9  # the extra record does not replace the final evaluation
+        assert (record.path / "eval" / "deploy-n6-seed30000-envs3-cs0.5.json").is_file()
+        evaluate_main([f"run_dir={record.path}", "regime=deploy", "episodes=5", "num_envs=5"])
+        assert (record.path / "eval" / "deploy-n5-seed30000-envs5.json").is_file()
+        assert (record.path / "eval" / "deploy.json").read_bytes() == final  # training's record untouched
+    assert len(load_runs(root)) == 9
+    c_sqil = next(r for r in load_runs(root) if r.label == "c_sqil")
+    assert c_sqil.evaluations["deploy"].n_episodes == 8 and len(c_sqil.evaluations["deploy"].trajectories) == 2
     with pytest.raises(SystemExit, match="unknown argument"):
         evaluate_main([f"run_dir={root}", "episodez=3"])

@@ -1,14 +1,16 @@
 """Evaluate a finished run: ``python -m torchrl_causal.evaluate run_dir=<dir> regime=deploy episodes=1000``.
 
 Rebuilds the run's policy from its saved config and adjustment window, loads
-``checkpoints/best.pt`` and runs ``episodes`` episodes in batches of ``num_envs``
-(default: the run's ``eval.num_envs``). Prints the success rate ± SE, raw E[Y] ± std and
-the length of successful episodes, and writes ``<run_dir>/eval/<regime>.json`` (the
-record the report reads) unless ``save=false``. ``confounding_strength=<s>`` evaluates
-under another deployment shift; such records go to ``eval/<regime>-cs<s>.json`` and the
-report ignores them. ``device=<cpu|cuda|...>`` picks where the policy runs; by default the
-run's own device when this machine has it, else the CPU (a run trained on a GPU evaluates
-anywhere).
+``checkpoints/best.pt`` (the expert is rebuilt from the env) and runs ``episodes``
+episodes in batches of ``num_envs`` (default: the run's ``eval.num_envs``), seeded with
+``seed``. ``confounding_strength=<s>`` evaluates under another deployment shift,
+``trajectories=<n>`` keeps the positions of ``n`` episodes. Prints the success rate ±
+SE, raw E[Y] ± std and the length of successful episodes, and (unless ``save=false``)
+writes the record to ``<run_dir>/eval/<regime>-<settings>.json``, named after every
+setting that changes the numbers: the final evaluation of training
+(``eval/<regime>.json``, what the report reads) is never replaced.
+``device=<cpu|cuda|...>`` picks where the policy runs; by default the run's own device
+when this machine has it, else the CPU (a run trained on a GPU evaluates anywhere).
 """
 
 from __future__ import annotations
@@ -20,51 +22,57 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
+from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.metrics import EvaluationResult
-from torchrl_causal.evaluation.runs import CONFIG_FILE, EVAL_DIR, WINDOW_FILE
 from torchrl_causal.graphs.window import AdjustmentWindow
-from torchrl_causal.trainers import make_trainer
-from torchrl_causal.trainers.builders import make_env, maze_geometry
 from torchrl_causal.trainers.device import resolve_device
+from torchrl_causal.trainers.run_directory import RunDirectory
 
-__all__ = ["evaluate_run", "main"]
+__all__ = ["evaluate_run", "record_settings", "main"]
 
 _ARGS = {"run_dir", "regime", "episodes", "num_envs", "seed", "confounding_strength", "save", "trajectories", "device"}
+
+
+def record_settings(episodes: int, seed: int, num_envs: int, confounding_strength: float | None) -> str:
+    """The part of a record's name that tells its settings apart.
+
+    Examples:
+        >>> record_settings(1000, 30000, 100, None), record_settings(6, 1, 3, 0.5)
+        ('n1000-seed30000-envs100', 'n6-seed1-envs3-cs0.5')
+    """
+    name = f"n{episodes}-seed{seed}-envs{num_envs}"
+    return name if confounding_strength is None else f"{name}-cs{confounding_strength:g}"
 
 
 def evaluate_run(run_dir: str | Path, regime: str = "deploy", episodes: int = 1000, *, num_envs: int | None = None,
                  seed: int = 30_000, confounding_strength: float | None = None, trajectories: int = 0,
                  save: bool = True, device: str | None = None) -> EvaluationResult:
-    """Evaluates the best checkpoint of ``run_dir`` (see the module docstring)."""
-    run_dir = Path(run_dir)
-    config_file = run_dir / CONFIG_FILE
-    if not config_file.is_file():
-        raise FileNotFoundError(f"{run_dir} is not a run directory: {CONFIG_FILE} is missing")
-    cfg = OmegaConf.load(config_file)
-    if num_envs is not None:
-        cfg.eval.num_envs = int(num_envs)
+    """Evaluates the selected policy of ``run_dir`` (see the module docstring).
+
+    Raises:
+        ValueError: naming ``device`` when it is given and this machine lacks it.
+    """
+    run = RunDirectory(run_dir)
+    cfg = run.read_config()
     if confounding_strength is not None:
         cfg.env.confounding_strength = float(confounding_strength)
     if device is not None:
+        resolve_device(str(device))
         cfg.device = str(device)
     else:
         try:
-            resolve_device(str(OmegaConf.select(cfg, "device", default="cpu")))
+            resolve_device(cfg.device)
         except ValueError:
             cfg.device = "cpu"
-    trainer = make_trainer(cfg)
-    policy = None  # the expert is rebuilt for every env it evaluates in
-    if trainer.uses_window:
-        trainer.window = AdjustmentWindow.from_dict(json.loads((run_dir / WINDOW_FILE).read_text()))
-        policy = trainer.load_best_policy()
-    result = trainer.evaluate(regime, int(episodes), int(seed), trajectories=int(trajectories), progress=True,
-                              policy=policy)
+    num_envs = min(int(num_envs or cfg.eval.num_envs), int(episodes))
+    window = AdjustmentWindow.from_dict(json.loads(run.window_file.read_text())) if cfg.algo.trainer else None
+    evaluator = Evaluator(cfg, window, progress=True)
+    policy = evaluator.load_best_policy(run) if window is not None else None
+    result = evaluator.evaluate(policy, regime, int(episodes), int(seed), trajectories=int(trajectories),
+                                num_envs=num_envs)
     if save:
-        name = regime if confounding_strength is None else f"{regime}-cs{float(confounding_strength):g}"
-        record = result.to_dict()
-        record["maze"] = maze_geometry(make_env(cfg, regime, 1, 0))
-        (run_dir / EVAL_DIR).mkdir(exist_ok=True)
-        (run_dir / EVAL_DIR / f"{name}.json").write_text(json.dumps(record))
+        settings = record_settings(int(episodes), int(seed), num_envs, confounding_strength)
+        run.write_json(run.eval_path(regime, settings), evaluator.record(result))
     return result
 
 
@@ -73,7 +81,8 @@ def main(argv: Sequence[str] | None = None) -> EvaluationResult:
     unknown = set(args) - _ARGS
     if unknown or "run_dir" not in args:
         raise SystemExit(f"usage: python -m torchrl_causal.evaluate run_dir=<dir> [regime=deploy] [episodes=1000] "
-                         f"[num_envs=...] [seed=...] [confounding_strength=...] [save=true] [device=...]"
+                         f"[num_envs=...] [seed=...] [confounding_strength=...] [trajectories=0] [save=true] "
+                         f"[device=...]"
                          + (f"; unknown argument(s) {sorted(unknown)}" if unknown else ""))
     result = evaluate_run(**{k: args[k] for k in args})
     s = result.summary()

@@ -32,7 +32,8 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.envs import EnvBase
-from tqdm.auto import tqdm
+
+from torchrl_causal.progress import progress as progress_reporter
 
 __all__ = [
     "FORMAT_VERSION",
@@ -96,7 +97,7 @@ def _rollout_episodes(
     finished: list[tuple[int, int, int]] = []  # (end step, env index, start step)
     starts = torch.zeros(n_envs, dtype=torch.long)
     td = env.reset()
-    with tqdm(total=episodes, desc="demonstrations", unit="episode", disable=not progress) as bar:
+    with progress_reporter(episodes, "demonstrations", "episodes", enabled=progress) as bar:
         while len(finished) < episodes:
             td = policy(td)
             transition, td = env.step_and_maybe_reset(td)
@@ -140,7 +141,7 @@ def collect_demonstrations(
         path: dataset directory to create.
         seed: seeds ``env`` before collecting (recorded in the metadata).
         overwrite: replace an existing dataset at ``path`` (else a :class:`FileExistsError`).
-        progress: show a tqdm progress bar.
+        progress: report progress (a bar on a terminal, else periodic log lines).
 
     Returns:
         The stored dataset, memory-mapped from ``path`` (as :func:`load_demonstrations` gives).
@@ -183,9 +184,17 @@ def collect_demonstrations(
     return load_demonstrations(path)
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def _write_atomically(data: TensorDictBase, metadata: Mapping[str, Any], path: Path, overwrite: bool) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    # mkdtemp creates 0700; the dataset gets the mode any new directory would (shared sets).
+    staging.chmod(0o777 & ~_umask())
     try:
         data.memmap(staging / _DATA_DIR)
         (staging / _METADATA_FILE).write_text(json.dumps(metadata, indent=2, sort_keys=True))

@@ -8,8 +8,8 @@ validation, seeding, step counting, truncation at ``horizon``, the ``"success"``
 resets); subclasses implement three hooks (:meth:`~ConfoundedEnv._reset_state`,
 :meth:`~ConfoundedEnv._transition`, :meth:`~ConfoundedEnv._observation`).
 
-:class:`GustConfoundedEnv` adds the confounding mechanism of the maze suite (DESIGN.md):
-a piecewise-constant :class:`GustProcess` that pushes the body and enters the reward, and a
+:class:`GustConfoundedEnv` adds the confounding mechanism of the maze suite: a
+piecewise-constant :class:`GustProcess` that pushes the body and enters the reward, and a
 :class:`CompassSensor` whose reading mixes the true signal with the gust direction and is
 rotated by ``confounding_strength * pi`` in the deployment regime. Both helpers are plain
 batched torch functions, so envs that simulate in numpy/MuJoCo can call them on tensors.
@@ -21,7 +21,7 @@ import math
 from abc import abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import torch
 from tensordict import TensorDict, TensorDictBase
@@ -178,6 +178,12 @@ class CompassSensor:
         return rotate(torch.tanh(raw), rotation)
 
 
+def _copy_state(value: Any, device: torch.device | None = None) -> Any:
+    if isinstance(value, Mapping):
+        return {key: _copy_state(item, device) for key, item in value.items()}
+    return value.to(device).clone() if device is not None else value.clone()
+
+
 def _validate_regime(regime: str) -> str:
     if regime not in REGIMES:
         raise ValueError(f"regime must be one of {REGIMES}, got {regime!r}")
@@ -214,6 +220,10 @@ class ConfoundedEnv(EnvBase):
     success), handles partial resets (``"_reset"``) and seeds a private
     :class:`torch.Generator` through :meth:`set_seed`, so that a seed reproduces a rollout.
 
+    The env's runtime state (the generator and the :attr:`runtime_attributes`) is its
+    module extra state: ``env.load_state_dict(state)`` with a ``state = env.state_dict()``
+    taken mid-episode continues those episodes exactly (a resumed training run).
+
     Args:
         batch_size: the env's batch shape (any shape, ``()`` included).
         regime: ``"train"`` (demonstration collection) or ``"deploy"`` (evaluation).
@@ -223,6 +233,9 @@ class ConfoundedEnv(EnvBase):
         device: torch device of the env.
         seed: seed of the env's generator (``None`` draws one from torch's global RNG).
     """
+
+    #: attributes holding what changes during episodes; subclasses add theirs.
+    runtime_attributes: ClassVar[tuple[str, ...]] = ("_step_count", "_success")
 
     def __init__(
         self,
@@ -279,6 +292,35 @@ class ConfoundedEnv(EnvBase):
             "confounding_strength": self.confounding_strength,
             "horizon": self.horizon,
         }
+
+    def get_extra_state(self) -> dict[str, Any]:
+        """The generator's state and a copy of every :attr:`runtime_attributes` entry
+        (tensors or dicts of tensors; absent before the first reset).
+
+        Examples:
+            >>> from torchrl_causal.envs import RoverMazeEnv
+            >>> env = RoverMazeEnv(maze="u", batch_size=(2,), seed=0)
+            >>> forward = lambda td: td.set("action", torch.full((2, 2), 0.5))
+            >>> td = env.rollout(3, forward)
+            >>> saved = env.state_dict()  # mid-episode
+            >>> continued = env.rollout(4, forward, auto_reset=False, tensordict=td[..., -1]["next"].clone())
+            >>> _ = env.load_state_dict(saved)
+            >>> again = env.rollout(4, forward, auto_reset=False, tensordict=td[..., -1]["next"].clone())
+            >>> torch.equal(again["next", "P"], continued["next", "P"]), torch.equal(again["W"], continued["W"])
+            (True, True)
+        """
+        state: dict[str, Any] = {"rng": self.rng.get_state()}
+        for name in self.runtime_attributes:
+            if hasattr(self, name):
+                state[name] = _copy_state(getattr(self, name))
+        return state
+
+    def set_extra_state(self, state: Mapping[str, Any]) -> None:
+        """Inverse of :meth:`get_extra_state`."""
+        self.rng.set_state(state["rng"])
+        for name in self.runtime_attributes:
+            if name in state:
+                setattr(self, name, _copy_state(state[name], self.device))
 
     # -- hooks for subclasses ------------------------------------------------------------
 
@@ -378,6 +420,7 @@ class GustConfoundedEnv(ConfoundedEnv):
     gust_process: GustProcess = GustProcess()
     compass: CompassSensor = CompassSensor()
     metres_per_unit: float = 1.0
+    runtime_attributes = (*ConfoundedEnv.runtime_attributes, "gust")
 
     @property
     def compass_rotation(self) -> float:

@@ -50,7 +50,7 @@ class HumanoidMazeEnv(MujocoMazeEnv):
     hinges), ``"W"`` vibration sensor (2), ``"action"`` = X, the 21 torques in
     ``[-1, 1]``. The imitator's V^O is 68 state dims plus the previous action: 89.
 
-    Mechanism: the tremor U (``("scm", "U")``, DESIGN.md's gust process) pushes the torso
+    Mechanism: the tremor U (``("scm", "U")``, the maze suite's gust process) pushes the torso
     with its force in newtons (the humanoid weighs 40.8 kg, so tremors disturb it far
     less than the wind disturbs the 0.91 kg ant, as the paper reports); the vibration
     reading is ``tanh(0.9 C_xy + 0.1 tremor direction + N(0, 0.05²))`` (C_xy is the

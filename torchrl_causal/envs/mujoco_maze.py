@@ -21,7 +21,7 @@ import sys
 from abc import abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import mujoco
 import numpy as np
@@ -209,6 +209,22 @@ class BatchedSimulation:
     def qvel(self) -> np.ndarray:
         """A fresh ``(n, nv)`` copy of the generalised velocities."""
         return np.stack([data.qvel for data in self.datas])
+
+    def get_state(self) -> np.ndarray:
+        """``(n, size)`` integration state of every simulation (``mj_getState``: time,
+        positions, velocities, actuator activations, warm start, controls, applied forces)."""
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        state = np.empty((self.num_envs, mujoco.mj_stateSize(self.model, spec)))
+        for data, row in zip(self.datas, state):
+            mujoco.mj_getState(self.model, data, row, spec)
+        return state
+
+    def set_state(self, state: np.ndarray) -> None:
+        """Inverse of :meth:`get_state` (``mj_setState``, then ``mj_forward``)."""
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        for data, row in zip(self.datas, np.asarray(state, dtype=np.float64)):
+            mujoco.mj_setState(self.model, data, row, spec)
+            mujoco.mj_forward(self.model, data)
 
 
 class MazeSimulator(BatchedSimulation):
@@ -465,6 +481,17 @@ class MujocoMazeEnv(GustConfoundedEnv):
         """
         tensor = torch.from_numpy(array.astype(np.float32)).to(self.device)
         return tensor.reshape(*self.batch_size, *array.shape[1:])
+
+    def get_extra_state(self) -> dict[str, Any]:
+        """:meth:`ConfoundedEnv.get_extra_state` plus every simulation's physics state and
+        the variable buffer read from it."""
+        return {**super().get_extra_state(), "physics": torch.from_numpy(self.simulator.get_state()),
+                "variables": torch.from_numpy(self._state.copy())}
+
+    def set_extra_state(self, state: Mapping[str, Any]) -> None:
+        super().set_extra_state(state)
+        self.simulator.set_state(state["physics"].numpy())
+        np.copyto(self._state, state["variables"].numpy())
 
     # -- public ----------------------------------------------------------------------------
 

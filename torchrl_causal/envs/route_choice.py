@@ -111,6 +111,8 @@ class RouteChoiceEnv(ConfoundedEnv):
         True
     """
 
+    runtime_attributes = (*ConfoundedEnv.runtime_attributes, "_state")
+
     def __init__(self, *, horizon: int = 1, **kwargs) -> None:
         if horizon != 1:
             raise ValueError(f"RouteChoiceEnv is single-stage: horizon must be 1, got {horizon!r}")

@@ -7,7 +7,7 @@ The rover mirrors the Confounded AntMaze mechanism at a fraction of the cost (no
   independent N(0, 0.05^2) radians per step, so the expert must keep correcting it;
 * the position P moves by L along O, plus the push of the gust U; walls stop motion along
   each blocked axis (the rover slides along walls and never crosses one);
-* the gust process of DESIGN.md (:class:`~torchrl_causal.envs.GustProcess`) pushes the
+* the maze suite's gust process (:class:`~torchrl_causal.envs.GustProcess`) pushes the
   rover, costs reward, and contaminates the compass W (0.9 heading + 0.1 gust direction +
   noise, tanh-bounded, rotated by ``confounding_strength * pi`` when deployed);
 * the reward is the maze suite's ``1{success} - |U_t| (1 + d_t / 25)`` per step, with the
@@ -161,6 +161,7 @@ class RoverMazeEnv(GustConfoundedEnv):
 
     #: a rover cell stands for one 4 m AntMaze cell in the reward's distance term.
     metres_per_unit: float = 4.0
+    runtime_attributes = (*GustConfoundedEnv.runtime_attributes, "position", "heading", "speed")
 
     def __init__(self, maze: str = "medium", *, horizon: int = 1000, params: RoverParameters | None = None, **kwargs) -> None:
         if maze not in ROVER_TASKS:

@@ -18,7 +18,8 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
-from tqdm.auto import tqdm
+
+from torchrl_causal.progress import progress as progress_reporter
 
 __all__ = ["EvaluationResult", "evaluate_policy"]
 
@@ -196,7 +197,7 @@ def evaluate_policy(
         seeds: recorded in the result.
         position_key: observation key of the 2-D position, recorded for the first
             ``trajectories`` episodes (``None`` records nothing).
-        progress: show a tqdm bar over episodes.
+        progress: report progress over episodes (a bar on a terminal, else log lines).
 
     Examples:
         >>> from torchrl_causal.envs import RouteChoiceEnv
@@ -216,7 +217,7 @@ def evaluate_policy(
     returns: list[float] = []
     lengths: list[int] = []
     paths: list[list[list[float]]] = []
-    bar = tqdm(total=episodes, desc=f"eval[{regime}]", leave=False, disable=not progress)
+    bar = progress_reporter(episodes, f"eval[{regime}]", "episodes", enabled=progress, leave=False)
     with set_exploration_type(ExplorationType.DETERMINISTIC):
         while len(successes) < episodes:
             td = env.reset()

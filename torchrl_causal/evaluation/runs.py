@@ -1,17 +1,10 @@
-"""The run-directory layout and reading finished runs back for reports.
+"""Reading finished runs back for reports.
 
-A run directory (``cfg.run_dir``) holds::
-
-    config.yaml              the full resolved config of the run
-    window.json              the adjustment window the policy was trained on
-    status.json              {"status": "running" | "complete", counters, best evaluation}
-    checkpoints/last.pt      full training state for resume (atomic: temp file + rename)
-    checkpoints/best.pt      the policy with the best train-regime evaluation return
-    logs/scalars/...csv      TorchRL CSVLogger scalars (``eval/train_return`` = training curve)
-    eval/train.json          final evaluation of the best policy in each regime
-    eval/deploy.json         (:class:`~torchrl_causal.evaluation.EvaluationResult` records)
-
-:func:`load_runs` finds every run below a folder that has at least one final evaluation.
+A run directory's layout is :class:`~torchrl_causal.trainers.RunDirectory`'s (config,
+window, status, checkpoints, scalar logs, ``eval/train.json`` and ``eval/deploy.json``,
+the final evaluation of the selected policy in each regime). :func:`load_runs` finds
+every run below a folder that has at least one final evaluation; records that
+``python -m torchrl_causal.evaluate`` wrote under other names are not part of it.
 """
 
 from __future__ import annotations
@@ -27,14 +20,9 @@ from typing import Any, NamedTuple
 from omegaconf import OmegaConf
 
 from torchrl_causal.evaluation.metrics import EvaluationResult
+from torchrl_causal.trainers.run_directory import CONFIG_FILE, EVAL_DIR, TRAIN_CURVE, RunDirectory, run_label
 
 __all__ = [
-    "CONFIG_FILE",
-    "WINDOW_FILE",
-    "STATUS_FILE",
-    "EVAL_DIR",
-    "LOG_DIR",
-    "TRAIN_CURVE",
     "Setting",
     "RunRecord",
     "eval_path",
@@ -44,17 +32,10 @@ __all__ = [
     "mean_curve",
 ]
 
-CONFIG_FILE = "config.yaml"
-WINDOW_FILE = "window.json"
-STATUS_FILE = "status.json"
-EVAL_DIR = "eval"
-LOG_DIR = "logs"
-TRAIN_CURVE = "eval/train_return"  # scalar logged at every periodic train-regime evaluation
-
 
 def eval_path(run_dir: str | Path, regime: str) -> Path:
     """Where the final evaluation of ``regime`` is stored."""
-    return Path(run_dir) / EVAL_DIR / f"{regime}.json"
+    return RunDirectory(run_dir).eval_path(regime)
 
 
 class Setting(NamedTuple):
@@ -105,28 +86,22 @@ def read_scalar_csv(path: str | Path) -> list[tuple[int, float]]:
 
 def load_run(run_dir: str | Path) -> RunRecord:
     """Reads one run directory (its config, final evaluations and training curve)."""
-    from torchrl_causal.trainers.config import run_label
-
-    run_dir = Path(run_dir)
-    config_file = run_dir / CONFIG_FILE
-    if not config_file.is_file():
-        raise FileNotFoundError(f"{run_dir} is not a run directory: {CONFIG_FILE} is missing")
-    cfg = OmegaConf.load(config_file)
+    run = RunDirectory(run_dir)
+    cfg = run.read_config()
     for key in ("env.name", "env.horizon", "env.confounding_strength", "window.k", "algo.name", "causal", "seed"):
         if OmegaConf.select(cfg, key) is None:
-            raise ValueError(f"{config_file} lacks the key {key!r}")
+            raise ValueError(f"{run.config_file} lacks the key {key!r}")
     evaluations: dict[str, EvaluationResult] = {}
     maze = None
-    for path in (eval_path(run_dir, regime) for regime in ("train", "deploy")):
+    for path in (run.eval_path(regime) for regime in ("train", "deploy")):
         if not path.is_file():
             continue
         data = json.loads(path.read_text())
         evaluations[data["regime"]] = EvaluationResult.from_dict(data)
         maze = data.get("maze", maze)
-    curve_file = run_dir / LOG_DIR / "scalars" / f"{TRAIN_CURVE}.csv"
-    status_file = run_dir / STATUS_FILE
+    curve_file = run.log_dir / "scalars" / f"{TRAIN_CURVE}.csv"
     return RunRecord(
-        path=run_dir,
+        path=run.path,
         label=run_label(cfg.algo.name, bool(cfg.causal), bool(OmegaConf.select(cfg, "window.window_matched"))),
         setting=Setting(
             str(cfg.env.name), int(cfg.env.horizon), float(cfg.env.confounding_strength), int(cfg.window.k)
@@ -134,7 +109,7 @@ def load_run(run_dir: str | Path) -> RunRecord:
         seed=int(cfg.seed),
         evaluations=evaluations,
         curve=read_scalar_csv(curve_file) if curve_file.is_file() else (),
-        unit=json.loads(status_file.read_text()).get("unit", "") if status_file.is_file() else "",
+        unit=run.read_status().get("unit", ""),
         maze=maze,
     )
 

@@ -170,7 +170,7 @@ def raw_markdown(table: Table) -> str:
     header = ["Algorithm"]
     for regime in REGIMES:
         header += [f"E[Y] ({regime})", f"SR % ({regime})"]
-    header += ["episodes/regime", "seeds"]
+    header += ["episodes (train / deploy)", "seeds"]
     rows = []
     for label in ordered_labels(table):
         row = [display_name(label)]
@@ -180,8 +180,9 @@ def raw_markdown(table: Table) -> str:
                 [_pm(result.return_mean, result.return_std), _pm(100 * result.success_rate, 100 * result.success_se)]
                 if result is not None else ["—", "—"]
             )
-        any_result = next(iter(table[label].values()))
-        row += [str(any_result.n_episodes), str(len(set(any_result.seeds)))]
+        counts = [str(table[label][regime].n_episodes) if regime in table[label] else "—" for regime in REGIMES]
+        seeds = {seed for result in table[label].values() for seed in result.seeds}
+        row += [" / ".join(counts), str(len(seeds))]
         rows.append(row)
     return _markdown(header, rows)
 

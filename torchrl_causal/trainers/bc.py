@@ -15,20 +15,12 @@ from collections.abc import Mapping
 from typing import Any
 
 import torch
-from omegaconf import DictConfig
+from hydra.utils import instantiate
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
-from torchrl.envs import EnvBase
 
-from torchrl_causal.modules import make_deterministic_actor
-from torchrl_causal.objectives import HuberBCLoss
 from torchrl_causal.trainers.base import Trainer
-from torchrl_causal.trainers.builders import (
-    expert_transitions,
-    load_or_collect_demonstrations,
-    make_imitator_env,
-    observation_dim,
-)
+from torchrl_causal.trainers.builders import expert_transitions, load_or_collect_demonstrations, make_imitator_env, make_policy
 
 __all__ = ["BCTrainer", "episode_split"]
 
@@ -60,16 +52,7 @@ class BCTrainer(Trainer):
     """(Causal) BC with early stopping; progress is counted in epochs."""
 
     unit = "epochs"
-
-    @property
-    def total(self) -> int:
-        return int(self.cfg.algo.epochs)
-
-    @classmethod
-    def build_policy(cls, cfg: DictConfig, env: EnvBase) -> TensorDictModuleBase:
-        a = cfg.algo.actor
-        return make_deterministic_actor(observation_dim(env), env.action_spec, hidden=int(a.hidden),
-                                        num_blocks=int(a.blocks), dropout=float(a.dropout))
+    budget_key = "algo.epochs"
 
     @property
     def policy(self) -> TensorDictModuleBase:
@@ -79,18 +62,18 @@ class BCTrainer(Trainer):
         algo = self.cfg.algo
         demos = load_or_collect_demonstrations(self.cfg)
         data = expert_transitions(self.window, demos).select("observation", "action")
-        self.generator = torch.Generator().manual_seed(int(self.cfg.seed))
-        train, val = episode_split(demos["episode"], float(algo.val_fraction), self.generator)
+        self.generator = torch.Generator().manual_seed(self.cfg.seed)
+        train, val = episode_split(demos["episode"], algo.val_fraction, self.generator)
         self.train_data, self.val_data = data[train].to(self.device), data[val].to(self.device)
-        env = make_imitator_env(self.cfg, self.window, "train", 1, int(self.cfg.seed))
-        self.loss = HuberBCLoss(self.build_policy(self.cfg, env).to(self.device), delta=float(algo.huber_delta))
+        env = make_imitator_env(self.cfg, self.window, "train", 1, self.cfg.seed)
+        self.loss = instantiate(algo.loss)(make_policy(self.cfg, env).to(self.device))
         env.close()
-        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=float(algo.lr))
+        self.optimizer = instantiate(algo.optimizer)(self.loss.parameters())
         self.best_val_loss = math.inf
         self.epochs_without_improvement = 0
 
     def _batches(self, data: TensorDictBase, shuffle: bool):
-        size = int(self.cfg.algo.batch_size)
+        size = self.cfg.algo.batch_size
         order = torch.randperm(data.numel(), generator=self.generator) if shuffle else torch.arange(data.numel())
         for start in range(0, data.numel(), size):
             yield data[order[start:start + size]]
@@ -117,12 +100,9 @@ class BCTrainer(Trainer):
             self.best_val_loss, self.epochs_without_improvement = val, 0
         else:
             self.epochs_without_improvement += 1
-            self.stopped = self.epochs_without_improvement >= int(self.cfg.algo.patience)
+            self.stopped = self.epochs_without_improvement >= self.cfg.algo.patience
         self.progress += 1
         return {"train/loss_bc": torch.stack(losses).mean(), "val/loss_bc": val}
-
-    def checkpoint_due(self, before: int) -> bool:
-        return True  # an epoch is a natural, cheap checkpoint: resume is then exact
 
     def training_state(self) -> dict[str, Any]:
         return {

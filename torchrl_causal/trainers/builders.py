@@ -13,25 +13,28 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from hydra.utils import get_class, instantiate
+from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModuleBase
 from torchrl.data import Binary, Bounded, Composite, TensorSpec
 from torchrl.envs import EnvBase, Transform, TransformedEnv
 
 from torchrl_causal.graphs.window import AdjustmentWindow
+from torchrl_causal.trainers.schema import WindowMode
 from torchrl_causal.transforms import CausalWindowTransform
 
 __all__ = [
     "RelaxedBinaryAction",
+    "instantiate_with_strings",
     "make_env",
     "make_window",
     "make_imitator_env",
+    "make_policy",
     "make_expert",
     "load_or_collect_demonstrations",
     "expert_transitions",
     "observation_dim",
-    "maze_geometry",
     "TRANSITION_KEYS",
 ]
 
@@ -79,27 +82,26 @@ class RelaxedBinaryAction(Transform):
         return Bounded(0.0, 1.0, shape=action_spec.shape, device=action_spec.device, dtype=torch.float32)
 
 
+def instantiate_with_strings(node: DictConfig) -> Any:
+    """``instantiate(node)`` with the schema's enum values passed as their strings, which
+    is what the constructors take (``IQLearnLoss(variant="paper")``, ``reward="logit"``)."""
+    return instantiate(OmegaConf.to_container(node, resolve=True, enum_to_str=True))
+
+
 def make_env(cfg: DictConfig, regime: str, batch_size: int, seed: int) -> EnvBase:
     """The raw confounded env of ``cfg.env`` (every key, latent ones included)."""
-    return instantiate(
-        cfg.env.make,
-        regime=regime,
-        batch_size=(batch_size,),
-        horizon=int(cfg.env.horizon),
-        confounding_strength=float(cfg.env.confounding_strength),
-        seed=int(seed),
-    )
+    return instantiate(cfg.env.make, regime=regime, batch_size=(batch_size,), horizon=cfg.env.horizon,
+                       confounding_strength=cfg.env.confounding_strength, seed=seed)
 
 
-def make_window(cfg: DictConfig, env: EnvBase) -> AdjustmentWindow:
+def make_window(cfg: DictConfig) -> AdjustmentWindow:
     """The adjustment window the imitator conditions on (``cfg.causal``, ``cfg.window``)."""
-    return CausalWindowTransform.from_env(
-        env,
-        int(cfg.window.k),
-        causal=bool(cfg.causal),
-        mode=str(cfg.window.mode),
-        window_matched=bool(cfg.window.window_matched),
-    ).window
+    env = make_env(cfg, "train", 1, cfg.seed)
+    try:
+        return CausalWindowTransform.from_env(env, cfg.window.k, causal=cfg.causal, mode=WindowMode(cfg.window.mode).value,
+                                              window_matched=cfg.window.window_matched).window
+    finally:
+        env.close()
 
 
 def _needs_relaxation(env: EnvBase) -> bool:
@@ -127,11 +129,14 @@ def observation_dim(env: EnvBase) -> int:
     return int(env.observation_spec["observation"].shape[-1])
 
 
+def make_policy(cfg: DictConfig, env: EnvBase) -> TensorDictModuleBase:
+    """A freshly initialised actor of ``cfg.algo.actor`` for the imitator env ``env``."""
+    return instantiate(cfg.algo.actor)(observation_dim(env), env.action_spec)
+
+
 def make_expert(cfg: DictConfig, env: EnvBase) -> Callable[[TensorDictBase], TensorDictBase]:
     """The env's expert policy (``cfg.env.expert``), which reads the latent variables."""
-    target = get_class(cfg.env.expert._target_)
-    kwargs = {k: v for k, v in OmegaConf.to_container(cfg.env.expert, resolve=True).items() if k != "_target_"}
-    return target(env, **kwargs)
+    return instantiate(cfg.env.expert, env)
 
 
 def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
@@ -146,13 +151,13 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
     from torchrl_causal.data import collect_demonstrations, load_demonstrations
 
     path = Path(cfg.demos.path)
-    reference = make_env(cfg, "train", 1, int(cfg.demos.seed))
+    reference = make_env(cfg, "train", 1, cfg.demos.seed)
     if not path.exists():
-        episodes = int(cfg.demos.episodes)
-        env = make_env(cfg, "train", min(episodes, 64), int(cfg.demos.seed))
+        episodes = cfg.demos.episodes
+        env = make_env(cfg, "train", min(episodes, 64), cfg.demos.seed)
         try:
-            collect_demonstrations(env, make_expert(cfg, env), episodes, path, seed=int(cfg.demos.seed),
-                                   progress=bool(cfg.progress_bar))
+            collect_demonstrations(env, make_expert(cfg, env), episodes, path, seed=cfg.demos.seed,
+                                   progress=cfg.progress_bar)
         except OSError:
             if not path.exists():
                 raise
@@ -173,27 +178,3 @@ def expert_transitions(window: AdjustmentWindow, demonstrations: TensorDictBase)
     out.set("action", out.get("action").to(torch.float32))
     out.set("expert", torch.ones((*out.batch_size, 1), dtype=torch.bool))
     return out
-
-
-def maze_geometry(env: EnvBase) -> dict[str, Any] | None:
-    """Walls (axis-aligned ``[x0, y0, x1, y1]`` rectangles), start and goal of a maze env
-    with a :class:`~torchrl_causal.envs.MazeLayout`, for the report's trajectory figure;
-    ``None`` for envs without a maze (Route Choice).
-
-    Examples:
-        >>> from torchrl_causal.envs import RoverMazeEnv
-        >>> geometry = maze_geometry(RoverMazeEnv(maze="u", batch_size=(1,), seed=0))
-        >>> len(geometry["walls"]), geometry["walls"][0]
-        (18, [-2.5, 1.5, -1.5, 2.5])
-    """
-    layout = getattr(env, "layout", None)
-    if layout is None:
-        return None
-    half = layout.cell_size / 2
-    centres = layout.cell_center(layout.walls.nonzero()).tolist()
-    position = lambda name: getattr(env, name).reshape(-1)[:2].tolist() if hasattr(env, name) else None  # noqa: E731
-    return {
-        "walls": [[x - half, y - half, x + half, y + half] for x, y in centres],
-        "start": position("start_position"),
-        "goal": position("goal_position"),
-    }

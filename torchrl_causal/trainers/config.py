@@ -1,7 +1,8 @@
-"""Where the Hydra config tree lives and the resolvers it uses.
+"""Where the Hydra config tree lives, its resolvers and schemas, and composing it.
 
 The tree sits in ``configs/`` at the repository root, next to the package, so
-``python -m torchrl_causal.train`` finds it from any working directory.
+``python -m torchrl_causal.train`` finds it from any working directory. Its groups are
+typed by the structured configs of :mod:`torchrl_causal.trainers.schema`.
 
 Examples:
     >>> from torchrl_causal.trainers.config import compose_config
@@ -10,6 +11,10 @@ Examples:
     ('sqil', False, 3)
     >>> cfg.run_name
     'rovermaze_u/h1000-cs1.0-k10/sqil/seed3'
+    >>> compose_config(["seed=abc"])  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    hydra.errors.ConfigCompositionException: Error merging override seed=abc
 """
 
 from __future__ import annotations
@@ -19,42 +24,32 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-__all__ = ["CONFIG_DIR", "CONFIG_NAME", "run_label", "register_resolvers", "compose_config"]
+from torchrl_causal.trainers.run_directory import run_label
+from torchrl_causal.trainers.schema import register_configs
+
+__all__ = ["CONFIG_DIR", "CONFIG_NAME", "register_resolvers", "compose_config"]
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
 CONFIG_NAME = "config"
 
 
-def run_label(algorithm: str, causal: bool, window_matched: bool = False) -> str:
-    """The algorithm's name in tables and run directories: ``c_sqil``, ``sqil``, ``expert``.
-
-    Examples:
-        >>> run_label("iq_learn", True), run_label("bc", False), run_label("expert", False)
-        ('c_iq_learn', 'bc', 'expert')
-        >>> run_label("sqil", False, window_matched=True)
-        'sqil_wm'
-    """
-    if algorithm == "expert":
-        return "expert"
-    if causal and window_matched:
-        raise ValueError("window.window_matched=true is a non-causal baseline: use it with causal=false")
-    if causal:
-        return f"c_{algorithm}"
-    return f"{algorithm}_wm" if window_matched else algorithm
-
-
 def register_resolvers() -> None:
-    """Registers ``${run_label:algo,causal,window_matched}`` (idempotent)."""
+    """Registers ``${run_label:algo,causal,window_matched}`` and the schemas (idempotent)."""
     if not OmegaConf.has_resolver("run_label"):
         OmegaConf.register_new_resolver("run_label", run_label)
+    register_configs()
 
 
 def compose_config(overrides: Sequence[str] = ()) -> DictConfig:
     """Composes ``configs/config.yaml`` with command-line style ``overrides`` (no run).
 
+    Types are checked here; ranges by :func:`~torchrl_causal.trainers.schema.validate_config`.
+
     Raises:
         FileNotFoundError: if the config tree is not next to the package (a non-editable
             install without the ``configs/`` folder).
+        hydra.errors.ConfigCompositionException: a value of the wrong type, an unknown
+            key or an unknown group option, naming it.
     """
     from hydra import compose, initialize_config_dir
 

@@ -72,30 +72,27 @@ def resolve_device(spec: str | torch.device) -> torch.device:
 
 
 class DeviceCheck(Callback):
-    """Hydra callback: refuses an unavailable ``cfg.device`` before Hydra makes the run directory.
+    """Hydra callback: a multirun refuses an unavailable ``cfg.device`` before Hydra makes
+    the sweep folder.
 
-    Hydra creates a job's output folder (the run directory) before it calls the task
-    function, so ``device=`` is checked here, at ``on_run_start``, and the process exits
-    with the error (Hydra turns a callback's exceptions into warnings, not into a stop).
-    A multirun is checked at ``on_multirun_start`` too, unless its launcher sends the
-    jobs to other machines (SLURM): a login node without a GPU may submit
-    ``device=cuda`` jobs, which each check their own node when the trainer starts.
+    A single run needs no callback: it writes nothing before
+    :func:`~torchrl_causal.trainers.validate_config`, which checks the device. A
+    multirun's launcher creates the sweep folder (``run_root``, for ``multirun.yaml``)
+    before any job starts, so ``device=`` is checked here, at ``on_multirun_start``, and
+    the process exits with the error (Hydra turns a callback's exceptions into warnings,
+    not into a stop). Unless the launcher sends the jobs to other machines (SLURM): a
+    login node without a GPU may submit ``device=cuda`` jobs, which each check their own
+    node when the job starts.
     """
 
-    @staticmethod
-    def _check(config: DictConfig) -> None:
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        launcher = str(OmegaConf.select(config, "hydra.launcher._target_", default=""))
+        if "slurm" in launcher.lower():
+            return
         try:
             resolve_device(str(config.device))
         except ValueError as err:
             raise SystemExit(f"Error: {err}") from err
-
-    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
-        self._check(config)
-
-    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        launcher = str(OmegaConf.select(config, "hydra.launcher._target_", default=""))
-        if "slurm" not in launcher.lower():
-            self._check(config)
 
 
 class PolicyOnDevice(TensorDictModuleBase):

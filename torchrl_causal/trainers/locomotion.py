@@ -45,7 +45,7 @@ from torchrl_causal.envs.ant import (
     AntLocomotionEnv,
     make_locomotion_network,
 )
-from torchrl_causal.trainers.base import atomic_save, load_checkpoint
+from torchrl_causal.trainers.run_directory import atomic_save, load_checkpoint
 
 __all__ = ["LocomotionConfig", "evaluate_locomotion", "make_locomotion_actor", "train_locomotion"]
 

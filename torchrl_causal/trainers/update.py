@@ -2,27 +2,42 @@
 off-policy trainer takes it, with optional ``torch.compile``.
 
 TorchRL's own :class:`~torchrl.trainers.Trainer` owns its optimizer and loss hooks; the
-paper's protocol needs three Adam optimisers (critic, actor, temperature), gradient-norm
+paper's protocol needs three optimisers (critic, actor, temperature), gradient-norm
 clipping per network and a cosine schedule on the critic only, so the step is written
-out here once, for the trainer and the throughput benchmarks alike.
+out here once, for the trainer and the throughput benchmarks alike. The optimisers,
+the schedule and the target updater are given as factories (the partially instantiated
+``algo.*_optimizer``, ``algo.critic_scheduler`` and ``algo.target_update`` nodes of the
+config), which the update applies to the loss's parameters.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import inspect
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 import torch
 from tensordict import TensorDictBase
-from torchrl.objectives import SACLoss, SoftUpdate
+from torchrl.objectives import SACLoss, TargetNetUpdater
 
-__all__ = ["ActorCriticUpdate"]
+__all__ = ["ActorCriticUpdate", "OptimizerFactory"]
+
+#: Builds an optimiser from the parameters it updates (e.g. ``partial(torch.optim.Adam, lr=3e-4)``).
+OptimizerFactory = Callable[[Iterable[torch.Tensor]], torch.optim.Optimizer]
+
+
+def _build_optimizer(factory: OptimizerFactory, params: list[torch.Tensor]) -> torch.optim.Optimizer:
+    # On CUDA a fused step is one kernel per step instead of one per tensor, where the
+    # optimiser offers it.
+    if params[0].device.type == "cuda" and "fused" in inspect.signature(factory).parameters:
+        return factory(params, fused=True)
+    return factory(params)
 
 
 class ActorCriticUpdate:
     """Loss forward, one backward of ``loss_qvalue + loss_actor + loss_alpha``, gradient
-    norms clipped per network, Adam steps for critic, actor and alpha, the critic's
-    cosine learning-rate schedule, then a Polyak update of the target critics.
+    norms clipped per network, optimiser steps for critic, actor and alpha, the critic's
+    learning-rate schedule, then the update of the target critics.
 
     SACLoss detaches the critics inside the actor loss, so one backward pass gives each
     network the gradient of its own objective. A step never reads a value back to the
@@ -37,30 +52,42 @@ class ActorCriticUpdate:
 
     Args:
         loss: a :class:`~torchrl.objectives.SACLoss` (or subclass) whose networks are
-            already on their device. On CUDA the Adam steps are fused.
+            already on their device.
 
     Keyword Args:
-        lr_actor, lr_critic, lr_alpha (float): Adam learning rates.
+        actor_optimizer, critic_optimizer, alpha_optimizer (OptimizerFactory): build
+            each optimiser from its parameters. On CUDA the steps are fused where the
+            optimiser offers it (``fused=True``).
+        target_update (callable): builds the target-network updater from the loss
+            (e.g. ``partial(SoftUpdate, tau=0.005)``); it is stepped after every update.
         max_grad_norm (float): gradient-norm clip, applied to the critics and the actor
             separately.
-        tau (float): Polyak factor of the target critics.
-        cosine_updates (int, optional): length of the critic's cosine schedule in
-            updates; ``None`` keeps the learning rate constant.
+        critic_scheduler (callable, optional): builds the critic's learning-rate
+            schedule from the critic optimiser and ``T_max=cosine_updates`` (e.g.
+            ``partial(CosineAnnealingLR, eta_min=0.0)``); ``None`` keeps the learning
+            rate constant.
+        cosine_updates (int, optional): the updates the schedule spans; it is stepped
+            after each of them and then stays at its end. Required with
+            ``critic_scheduler``.
         compile (bool): compile the loss forward. Defaults to ``False``.
         compile_options (dict, optional): extra keyword arguments for
             :func:`torch.compile` (``backend``, ``mode``, ...).
 
     Examples:
+        >>> from functools import partial
         >>> from tensordict import TensorDict
         >>> from torchrl.data import Bounded
+        >>> from torchrl.objectives import SoftUpdate
         >>> from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
         >>> from torchrl_causal.objectives import SQILLoss
         >>> spec = Bounded(-1.0, 1.0, shape=(2,))
         >>> loss = SQILLoss(make_tanh_gaussian_actor(3, spec, hidden=16, num_blocks=1),
         ...                 make_qvalue_network(3, spec, hidden=16, num_blocks=1))
         >>> loss.make_value_estimator(gamma=0.99)
-        >>> update = ActorCriticUpdate(loss, lr_actor=3e-4, lr_critic=3e-4, lr_alpha=3e-4, max_grad_norm=1.0,
-        ...                            tau=0.005, cosine_updates=10)
+        >>> adam = partial(torch.optim.Adam, lr=3e-4)
+        >>> update = ActorCriticUpdate(loss, actor_optimizer=adam, critic_optimizer=adam, alpha_optimizer=adam,
+        ...                            target_update=partial(SoftUpdate, tau=0.005), max_grad_norm=1.0,
+        ...                            critic_scheduler=torch.optim.lr_scheduler.CosineAnnealingLR, cosine_updates=10)
         >>> batch = TensorDict({
         ...     "observation": torch.randn(4, 3), "action": spec.rand((4,)),
         ...     "expert": torch.tensor([[True], [True], [False], [False]]),
@@ -79,29 +106,29 @@ class ActorCriticUpdate:
         self,
         loss: SACLoss,
         *,
-        lr_actor: float,
-        lr_critic: float,
-        lr_alpha: float,
+        actor_optimizer: OptimizerFactory,
+        critic_optimizer: OptimizerFactory,
+        alpha_optimizer: OptimizerFactory,
+        target_update: Callable[[SACLoss], TargetNetUpdater],
         max_grad_norm: float,
-        tau: float,
+        critic_scheduler: Callable[..., torch.optim.lr_scheduler.LRScheduler] | None = None,
         cosine_updates: int | None = None,
         compile: bool = False,
         compile_options: Mapping[str, Any] | None = None,
     ) -> None:
         self.loss = loss
         self.max_grad_norm = float(max_grad_norm)
-        self.target_updater = SoftUpdate(loss, tau=tau)
-        fused = loss.log_alpha.device.type == "cuda"  # one kernel per step instead of one per tensor
+        self.target_updater = target_update(loss)
         self.critic_params = list(loss.qvalue_network_params.flatten_keys().values())
         self.actor_params = list(loss.actor_network_params.flatten_keys().values())
-        self.critic_optimizer = torch.optim.Adam(self.critic_params, lr=lr_critic, fused=fused)
-        self.actor_optimizer = torch.optim.Adam(self.actor_params, lr=lr_actor, fused=fused)
-        self.alpha_optimizer = torch.optim.Adam([loss.log_alpha], lr=lr_alpha, fused=fused)
-        if cosine_updates is not None and cosine_updates < 1:
-            raise ValueError(f"cosine_updates must be >= 1 (or None for a constant rate), got {cosine_updates}")
+        self.critic_optimizer = _build_optimizer(critic_optimizer, self.critic_params)
+        self.actor_optimizer = _build_optimizer(actor_optimizer, self.actor_params)
+        self.alpha_optimizer = _build_optimizer(alpha_optimizer, [loss.log_alpha])
+        if critic_scheduler is not None and (cosine_updates is None or cosine_updates < 1):
+            raise ValueError(f"a critic_scheduler needs cosine_updates >= 1, got {cosine_updates}")
         self.cosine_updates = cosine_updates
-        self.critic_schedule = (None if cosine_updates is None
-                                else torch.optim.lr_scheduler.CosineAnnealingLR(self.critic_optimizer, cosine_updates))
+        self.critic_schedule = (None if critic_scheduler is None
+                                else critic_scheduler(self.critic_optimizer, T_max=cosine_updates))
         self.updates = 0
         if compile:
             options = dict(compile_options or {})

@@ -148,6 +148,11 @@ class LagRing:
         self.frames[mask] = 0
         self.frames[mask, self.slot, : self._state_width] = states[mask].to(self.frames.dtype)
 
+    def restore(self, frames: torch.Tensor, slot: int) -> None:
+        """Puts back saved ``frames`` and ``slot`` (a checkpointed episode in flight)."""
+        self.frames.copy_(frames)
+        self.slot = slot
+
     def record_action(self, action: torch.Tensor) -> None:
         """Stores the action taken at the current step (``[*batch, action_width]``)."""
         self._actions[self.slot].copy_(action)

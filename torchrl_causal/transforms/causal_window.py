@@ -58,9 +58,9 @@ class CausalWindowTransform(Transform):
     **State.** One ring buffer of the last ``k + 1`` frames per environment of the
     (arbitrarily shaped) batch, zeroed when an environment is reset; a partial reset
     (``"_reset"`` mask) clears only the environments it names. The window itself, the
-    keys and the variable shapes are saved in the module's state dict
-    (:meth:`get_extra_state`), so a reloaded transform encodes identically, and loading
-    the state of a different window raises.
+    keys, the variable shapes and the ring buffer are saved in the module's state dict
+    (:meth:`get_extra_state`), so a reloaded transform encodes identically and continues
+    the episodes in flight, and loading the state of a different window raises.
 
     **Offline.** :meth:`encode_trajectories` encodes stored, time-ordered episodes (a
     demonstration dataset, a rollout) and gives exactly the tensors the transform
@@ -582,6 +582,8 @@ class CausalWindowTransform(Transform):
             "out_key": self.out_key,
             "action_key": self.action_key,
             "shapes": None if self._layout is None else {var: list(s) for var, s in self._layout.shapes.items()},
+            # The lag buffers, so that a restored env continues its episodes (resume).
+            "ring": None if self._ring is None else {"frames": self._ring.frames.clone(), "slot": self._ring.slot},
         }
 
     def set_extra_state(self, state: Mapping[str, Any]) -> None:
@@ -599,6 +601,10 @@ class CausalWindowTransform(Transform):
                 raise ValueError(f"the saved state has {name}={state[name]!r}, this transform {getattr(self, name)!r}")
         if state.get("shapes") is not None:
             self._set_layout({var: tuple(s) for var, s in state["shapes"].items()}, None)
+        if state.get("ring") is not None:
+            frames = state["ring"]["frames"]
+            self._ring = LagRing(self._require_layout(), frames.new_zeros((*frames.shape[:-2], self._layout.state_width)))
+            self._ring.restore(frames, int(state["ring"]["slot"]))
 
     def __repr__(self) -> str:
         lags = ", ".join(f"{var}@{list(lags)}" for var, lags in self.window.lags.items())

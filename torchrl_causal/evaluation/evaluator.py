@@ -1,0 +1,136 @@
+"""Evaluating the policies of one run config: the env they act in, the episodes, the records.
+
+:class:`Evaluator` builds the evaluation env of a run (the imitator's view through the
+run's adjustment window, or the raw env for the expert, which reads the latent
+variables), runs :func:`~torchrl_causal.evaluation.evaluate_policy` on it, and turns a
+result into the record stored in ``eval/*.json`` (with the maze geometry the report's
+trajectory figure draws). Training uses it for periodic train-regime evaluation, the
+run's end for the final evaluation in both regimes, ``python -m torchrl_causal.evaluate``
+for evaluations with other settings.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from omegaconf import DictConfig
+from tensordict.nn import TensorDictModuleBase
+from torchrl.envs import EnvBase
+
+from torchrl_causal.evaluation.metrics import EvaluationResult, Policy, evaluate_policy
+from torchrl_causal.graphs.window import AdjustmentWindow
+from torchrl_causal.trainers.builders import make_env, make_expert, make_imitator_env, make_policy
+from torchrl_causal.trainers.device import for_cpu_env, resolve_device
+from torchrl_causal.trainers.run_directory import CheckpointError, RunDirectory
+
+__all__ = ["Evaluator", "maze_geometry", "PERIODIC_EVAL_SEED", "FINAL_EVAL_SEED"]
+
+# Evaluation envs are seeded apart from the training env (and from each other), with the
+# same seed at every periodic evaluation so checkpoints are compared on the same episodes.
+PERIODIC_EVAL_SEED, FINAL_EVAL_SEED = 10_000, 20_000
+REGIMES = ("train", "deploy")
+
+
+def maze_geometry(env: EnvBase) -> dict[str, Any] | None:
+    """Walls (axis-aligned ``[x0, y0, x1, y1]`` rectangles), start and goal of a maze env
+    with a :class:`~torchrl_causal.envs.MazeLayout`, for the report's trajectory figure;
+    ``None`` for envs without a maze (Route Choice).
+
+    Examples:
+        >>> from torchrl_causal.envs import RoverMazeEnv
+        >>> geometry = maze_geometry(RoverMazeEnv(maze="u", batch_size=(1,), seed=0))
+        >>> len(geometry["walls"]), geometry["walls"][0]
+        (18, [-2.5, 1.5, -1.5, 2.5])
+    """
+    layout = getattr(env, "layout", None)
+    if layout is None:
+        return None
+    half = layout.cell_size / 2
+    centres = layout.cell_center(layout.walls.nonzero()).tolist()
+    position = lambda name: getattr(env, name).reshape(-1)[:2].tolist() if hasattr(env, name) else None  # noqa: E731
+    return {
+        "walls": [[x - half, y - half, x + half, y + half] for x, y in centres],
+        "start": position("start_position"),
+        "goal": position("goal_position"),
+    }
+
+
+class Evaluator:
+    """Evaluates policies of the run configured by ``cfg``.
+
+    Args:
+        cfg: the run's config (``env``, ``eval``, ``seed``, ``algo.actor``).
+        window: the adjustment window the policy conditions on; ``None`` evaluates in
+            the raw env (the expert).
+        progress: report progress over episodes.
+    """
+
+    def __init__(self, cfg: DictConfig, window: AdjustmentWindow | None, *, progress: bool = False) -> None:
+        self.cfg = cfg
+        self.window = window
+        self.progress = progress
+
+    def make_env(self, regime: str, batch_size: int, seed: int) -> EnvBase:
+        """The env a policy of this run acts in."""
+        if self.window is None:
+            return make_env(self.cfg, regime, batch_size, seed)
+        return make_imitator_env(self.cfg, self.window, regime, batch_size, seed)
+
+    def evaluate(self, policy: Policy | None, regime: str, episodes: int, seed: int, *, trajectories: int = 0,
+                 num_envs: int | None = None) -> EvaluationResult:
+        """Runs ``policy`` in eval mode (no dropout, deterministic actions) for ``episodes``
+        episodes in batches of ``num_envs`` (default ``cfg.eval.num_envs``).
+
+        ``policy=None`` evaluates the env's expert, built for each evaluation env (it
+        reads that env's latent state). A policy whose parameters live off the CPU acts
+        through :func:`~torchrl_causal.trainers.device.for_cpu_env` (the env steps on the CPU).
+        """
+        env = self.make_env(regime, min(num_envs or self.cfg.eval.num_envs, episodes), seed)
+        acting = make_expert(self.cfg, env) if policy is None else policy
+        was_training = getattr(acting, "training", None)  # scripted experts may be plain callables
+        if was_training is not None:
+            acting.eval()
+        try:
+            return evaluate_policy(
+                env, for_cpu_env(acting), episodes=episodes, max_steps=self.cfg.env.horizon, regime=regime, seeds=[self.cfg.seed],
+                position_key=self.cfg.env.position_key, trajectories=trajectories, progress=self.progress,
+            )
+        finally:
+            if was_training is not None:
+                acting.train(was_training)
+            env.close()
+
+    def periodic(self, policy: Policy) -> EvaluationResult:
+        """The train-regime evaluation that selects the best checkpoint (``cfg.eval.episodes``
+        episodes, the same ones every time)."""
+        return self.evaluate(policy, "train", self.cfg.eval.episodes, PERIODIC_EVAL_SEED + self.cfg.seed)
+
+    def final(self, policy: Policy | None) -> dict[str, EvaluationResult]:
+        """Both regimes on ``cfg.eval.final_episodes`` episodes, ``cfg.eval.trajectories``
+        deploy-regime positions kept for the figure."""
+        return {regime: self.evaluate(policy, regime, self.cfg.eval.final_episodes,
+                                      FINAL_EVAL_SEED + 1000 * offset + self.cfg.seed,
+                                      trajectories=self.cfg.eval.trajectories)
+                for offset, regime in enumerate(REGIMES)}
+
+    def record(self, result: EvaluationResult) -> dict[str, Any]:
+        """The JSON record of ``result`` (with the maze geometry)."""
+        env = make_env(self.cfg, result.regime, 1, 0)
+        try:
+            return {**result.to_dict(), "maze": maze_geometry(env)}
+        finally:
+            env.close()
+
+    def load_best_policy(self, run: RunDirectory) -> TensorDictModuleBase:
+        """The run's actor rebuilt from the config on ``cfg.device`` with ``checkpoints/best.pt`` loaded."""
+        device = resolve_device(self.cfg.device)
+        state = run.load_checkpoint(best=True, map_location=device)
+        if state is None:
+            raise CheckpointError(f"run {run.path} has no checkpoints/best.pt to evaluate")
+        env = self.make_env("train", 1, 0)
+        try:
+            policy = make_policy(self.cfg, env).to(device)
+        finally:
+            env.close()
+        policy.load_state_dict(state["policy"])
+        return policy

@@ -1,0 +1,278 @@
+"""A run's directory: its layout, status, atomic writes, checkpoints and config identity.
+
+A run directory (``cfg.run_dir``) holds::
+
+    config.yaml              the full resolved config of the run
+    window.json              the adjustment window the policy was trained on
+    status.json              {"status": "running" | "interrupted" | "failed" | "complete", counters}
+    train.log                the run's log lines (progress, evaluations, resume, errors)
+    checkpoints/last.pt      networks, optimisers, schedulers, RNG states and counters (resume)
+    checkpoints/best.pt      the policy with the best train-regime evaluation return
+    replay/                  the policy replay buffer, memory-mapped (off-policy runs)
+    logs/scalars/...csv      TorchRL CSVLogger scalars (``eval/train_return`` = training curve)
+    eval/train.json          final evaluation of the best policy in each regime
+    eval/deploy.json         (``EvaluationResult`` records); ``python -m torchrl_causal.evaluate``
+                             writes its records beside them under names carrying its settings
+
+Every file is written atomically (temporary file in the same folder, then rename), and
+checkpoints are read with ``torch.load(..., weights_only=True)``.
+
+A run directory belongs to one config. :meth:`RunDirectory.claim` compares the config
+that determines the result (everything but :data:`RUNTIME_KEYS` and an extendable
+budget) with the one stored in ``config.yaml`` and refuses a different one, naming the
+changed keys, before anything is written.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+__all__ = [
+    "CONFIG_FILE",
+    "WINDOW_FILE",
+    "STATUS_FILE",
+    "TRAIN_LOG",
+    "EVAL_DIR",
+    "LOG_DIR",
+    "TRAIN_CURVE",
+    "RUNTIME_KEYS",
+    "CheckpointError",
+    "ConfigMismatchError",
+    "RunDirectory",
+    "atomic_save",
+    "atomic_write_text",
+    "changed_keys",
+    "load_checkpoint",
+    "run_label",
+]
+
+CONFIG_FILE = "config.yaml"
+WINDOW_FILE = "window.json"
+STATUS_FILE = "status.json"
+TRAIN_LOG = "train.log"
+EVAL_DIR = "eval"
+LOG_DIR = "logs"
+CHECKPOINT_DIR = "checkpoints"
+REPLAY_DIR = "replay"
+TRAIN_CURVE = "eval/train_return"  # scalar logged at every periodic train-regime evaluation
+
+#: Config keys that change how a run executes or where it writes, never its numbers: they
+#: may differ between the attempts of one run (a resume on another machine, more threads).
+RUNTIME_KEYS: tuple[str, ...] = (
+    "resume", "progress_bar", "threads", "device", "compile", "log_every", "checkpoint_every_s", "logger",
+    "run_root", "run_name", "run_dir", "demos.path",
+)
+
+
+class CheckpointError(RuntimeError):
+    """A checkpoint that cannot be read or does not belong to this run."""
+
+
+class ConfigMismatchError(ValueError):
+    """A run directory holds a run of a different config."""
+
+
+def run_label(algorithm: str, causal: bool, window_matched: bool = False) -> str:
+    """The algorithm's name in tables and run directories: ``c_sqil``, ``sqil``, ``expert``.
+
+    Examples:
+        >>> run_label("iq_learn", True), run_label("bc", False), run_label("expert", False)
+        ('c_iq_learn', 'bc', 'expert')
+        >>> run_label("sqil", False, window_matched=True)
+        'sqil_wm'
+    """
+    if algorithm == "expert":
+        return "expert"
+    if causal and window_matched:
+        raise ValueError("window.window_matched=true is a non-causal baseline: use it with causal=false")
+    if causal:
+        return f"c_{algorithm}"
+    return f"{algorithm}_wm" if window_matched else algorithm
+
+
+def _temporary(path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path.with_name(f".{path.name}.tmp{os.getpid()}")
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Writes ``text`` to a temporary file beside ``path``, then renames it over ``path``."""
+    tmp = _temporary(path)
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def atomic_save(obj: Any, path: Path) -> None:
+    """``torch.save`` to a temporary file in the same folder, then rename over ``path``:
+    an interrupted save leaves the previous checkpoint intact."""
+    tmp = _temporary(path)
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def load_checkpoint(path: Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """``torch.load(..., weights_only=True)`` onto ``map_location``, with an error that
+    names the file. A checkpoint written on a GPU loads on a machine without one."""
+    try:
+        state = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as err:  # pickle, zip and unpickler errors all mean the same here
+        raise CheckpointError(f"checkpoint {path} is corrupted or not a torchrl-causal checkpoint: {err}") from err
+    if not isinstance(state, dict) or "progress" not in state:
+        raise CheckpointError(f"checkpoint {path} lacks the 'progress' entry of a torchrl-causal checkpoint")
+    return state
+
+
+def _flatten(node: Any, prefix: str = "") -> dict[str, Any]:
+    if isinstance(node, Mapping):
+        flat: dict[str, Any] = {}
+        for key, value in node.items():
+            flat.update(_flatten(value, f"{prefix}{key}."))
+        return flat
+    return {prefix[:-1]: node}
+
+
+def _identity(config: Mapping[str, Any], ignored: Iterable[str]) -> dict[str, Any]:
+    ignored = tuple(ignored)
+    return {key: value for key, value in _flatten(config).items()
+            if not any(key == skip or key.startswith(f"{skip}.") for skip in ignored)}
+
+
+def changed_keys(old: Mapping[str, Any], new: Mapping[str, Any], ignored: Iterable[str] = RUNTIME_KEYS) -> dict[str, tuple[Any, Any]]:
+    """``{key: (old value, new value)}`` for every leaf that differs, ``ignored`` keys aside
+    (a key absent on one side shows as ``<absent>``).
+
+    Examples:
+        >>> changed_keys({"algo": {"lr": 0.1, "n": 2}, "resume": True},
+        ...              {"algo": {"lr": 0.2, "n": 2, "new": 1}, "resume": False})
+        {'algo.lr': (0.1, 0.2), 'algo.new': ('<absent>', 1)}
+    """
+    before, after = _identity(old, ignored), _identity(new, ignored)
+    return {key: (before.get(key, "<absent>"), after.get(key, "<absent>"))
+            for key in sorted(set(before) | set(after)) if before.get(key, "<absent>") != after.get(key, "<absent>")}
+
+
+class RunDirectory:
+    """The files of one run (see the module docstring).
+
+    Args:
+        path: the run directory (``cfg.run_dir``); nothing is created until a write.
+    """
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = Path(path)
+
+    def __repr__(self) -> str:
+        return f"RunDirectory({str(self.path)!r})"
+
+    # ------------------------------------------------------------------ paths
+
+    @property
+    def config_file(self) -> Path:
+        return self.path / CONFIG_FILE
+
+    @property
+    def window_file(self) -> Path:
+        return self.path / WINDOW_FILE
+
+    @property
+    def status_file(self) -> Path:
+        return self.path / STATUS_FILE
+
+    @property
+    def train_log(self) -> Path:
+        return self.path / TRAIN_LOG
+
+    @property
+    def log_dir(self) -> Path:
+        return self.path / LOG_DIR
+
+    @property
+    def replay_dir(self) -> Path:
+        return self.path / REPLAY_DIR
+
+    @property
+    def last_checkpoint(self) -> Path:
+        return self.path / CHECKPOINT_DIR / "last.pt"
+
+    @property
+    def best_checkpoint(self) -> Path:
+        return self.path / CHECKPOINT_DIR / "best.pt"
+
+    def eval_path(self, regime: str, settings: str | None = None) -> Path:
+        """Where an evaluation record lives: ``eval/<regime>.json`` for the final evaluation
+        of training, ``eval/<regime>-<settings>.json`` for any other."""
+        return self.path / EVAL_DIR / (f"{regime}.json" if settings is None else f"{regime}-{settings}.json")
+
+    # ------------------------------------------------------------------ config
+
+    def read_config(self) -> DictConfig:
+        if not self.config_file.is_file():
+            raise FileNotFoundError(f"{self.path} is not a run directory: {CONFIG_FILE} is missing")
+        return OmegaConf.load(self.config_file)
+
+    def claim(self, cfg: DictConfig, ignored: Iterable[str] = ()) -> None:
+        """Makes this directory the run of ``cfg``, refusing another run's directory.
+
+        Compares ``cfg`` (resolved) with ``config.yaml``, :data:`RUNTIME_KEYS` and
+        ``ignored`` aside, and writes ``config.yaml`` only when they agree or none exists.
+
+        Raises:
+            ConfigMismatchError: naming every key whose value differs.
+        """
+        resolved = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+        if self.config_file.is_file():
+            stored = OmegaConf.to_container(self.read_config())
+            changes = changed_keys(stored, resolved, (*RUNTIME_KEYS, *ignored))
+            if changes:
+                listed = "; ".join(f"{key}: {old!r} -> {new!r}" for key, (old, new) in changes.items())
+                raise ConfigMismatchError(
+                    f"{self.path} holds a run of another config ({listed}). Nothing was changed: choose another "
+                    "run_root or run_name, or pass resume=false to discard that run and start this one there.")
+        atomic_write_text(self.config_file, OmegaConf.to_yaml(resolved))
+
+    def discard(self) -> None:
+        """Removes everything a previous attempt wrote (``resume=false``)."""
+        if self.path.is_dir():
+            shutil.rmtree(self.path)
+
+    # ------------------------------------------------------------------ status
+
+    def read_status(self) -> dict[str, Any]:
+        """``status.json`` (``{}`` before the first write)."""
+        return json.loads(self.status_file.read_text()) if self.status_file.is_file() else {}
+
+    def write_status(self, status: str, **fields: Any) -> None:
+        """Replaces ``status.json`` with ``status`` and ``fields`` (infinite floats become null)."""
+        fields = {k: None if isinstance(v, float) and math.isinf(v) else v for k, v in fields.items()}
+        atomic_write_text(self.status_file, json.dumps({"status": status, **fields}, indent=2))
+
+    def update_status(self, status: str, **fields: Any) -> None:
+        """Like :meth:`write_status`, keeping the fields already recorded."""
+        self.write_status(status, **{**{k: v for k, v in self.read_status().items() if k != "status"}, **fields})
+
+    # ------------------------------------------------------------------ records
+
+    def write_json(self, path: Path, record: Mapping[str, Any]) -> None:
+        atomic_write_text(path, json.dumps(record))
+
+    def read_json(self, path: Path) -> dict[str, Any]:
+        return json.loads(path.read_text())
+
+    # ------------------------------------------------------------------ checkpoints
+
+    def save_checkpoint(self, state: Mapping[str, Any], best: bool = False) -> None:
+        atomic_save(dict(state), self.best_checkpoint if best else self.last_checkpoint)
+
+    def load_checkpoint(self, best: bool = False, map_location: str | torch.device = "cpu") -> dict[str, Any] | None:
+        """The last (or best) checkpoint loaded onto ``map_location``, ``None`` when there is none."""
+        path = self.best_checkpoint if best else self.last_checkpoint
+        return load_checkpoint(path, map_location) if path.is_file() else None

@@ -1,0 +1,478 @@
+"""Typed schemas of the Hydra config tree (structured configs in Hydra's ConfigStore).
+
+Every group of ``configs/`` is merged onto one of these dataclasses at composition, so
+a value of the wrong type (``seed=abc``, ``causal=maybe``, ``window.mode=fuzzy``) or an
+unknown key fails before anything runs, with the offending key named. Ranges (counts
+>= 1, strengths in [0, 1]...) are field metadata that :func:`validate_config` checks on
+the composed, resolved config: also before a run directory exists.
+
+Objects built from the config are nodes with a ``_target_`` (the class or factory) and
+its keyword arguments under their own names; the trainer supplies the runtime
+arguments (observation size, action spec, parameters) through ``_partial_``.
+
+The schemas carry types and ranges, never values (every field is ``MISSING``): the YAML
+files hold the values, so a schema merged after them (``algo/iq_learn.yaml`` refines
+SQIL's schema) changes nothing.
+
+Examples:
+    >>> from omegaconf import OmegaConf
+    >>> node = OmegaConf.structured(WindowConfig(k=2, mode=WindowMode.relaxed, window_matched=False))
+    >>> node.mode = "fuzzy"  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    omegaconf.errors.ValidationError: Invalid value 'fuzzy', expected one of [exact, relaxed]
+    ...
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING, DictConfig, OmegaConf
+
+from torchrl_causal.trainers.device import resolve_device
+
+__all__ = [
+    "ALGO_SCHEMAS",
+    "AlgoConfig",
+    "BCConfig",
+    "Config",
+    "ConfigValueError",
+    "DemosConfig",
+    "EnvConfig",
+    "EvalConfig",
+    "GAILConfig",
+    "GAILReward",
+    "IQLearnConfig",
+    "IQLearnVariant",
+    "LoggerConfig",
+    "OffPolicyConfig",
+    "WindowConfig",
+    "WindowMode",
+    "register_configs",
+    "validate_config",
+]
+
+
+class ConfigValueError(ValueError):
+    """A config value of the right type that is not allowed (out of range, or an env
+    without the expert every algorithm needs)."""
+
+
+def _ranged(*, ge: float | None = None, gt: float | None = None, le: float | None = None,
+            lt: float | None = None, default: Any = MISSING) -> Any:
+    bounds = {name: value for name, value in (("ge", ge), ("gt", gt), ("le", le), ("lt", lt)) if value is not None}
+    return field(default=default, metadata=bounds)
+
+
+def at_least(minimum: int = 1, default: Any = MISSING) -> Any:
+    """An int field that must be ``>= minimum``."""
+    return _ranged(ge=minimum, default=default)
+
+
+def positive(default: Any = MISSING) -> Any:
+    """A float field that must be ``> 0``."""
+    return _ranged(gt=0.0, default=default)
+
+
+def unit_interval(*, open_low: bool = False, open_high: bool = False, default: Any = MISSING) -> Any:
+    """A float field in ``[0, 1]`` (either end optionally open)."""
+    return _ranged(**({"gt": 0.0} if open_low else {"ge": 0.0}), **({"lt": 1.0} if open_high else {"le": 1.0}),
+                   default=default)
+
+
+_BOUND_TEXT = {"ge": ">=", "gt": ">", "le": "<=", "lt": "<"}
+_BOUND_TEST = {"ge": float.__ge__, "gt": float.__gt__, "le": float.__le__, "lt": float.__lt__}
+
+
+# ---------------------------------------------------------------------- objects built from the config
+
+
+@dataclass
+class Target:
+    """A node Hydra instantiates: ``_target_`` plus its keyword arguments."""
+
+    _target_: str = MISSING
+    _partial_: bool = True
+
+
+@dataclass
+class ResidualMLPConfig(Target):
+    """A residual-MLP network factory (``make_tanh_gaussian_actor``, ``make_qvalue_network``...)."""
+
+    hidden: int = at_least()
+    num_blocks: int = at_least()
+    dropout: float = unit_interval(open_high=True)
+
+
+@dataclass
+class MLPConfig(Target):
+    """A plain MLP factory (GAIL's value network)."""
+
+    hidden: int = at_least()
+
+
+@dataclass
+class DiscriminatorConfig(MLPConfig):
+    dropout: float = unit_interval(open_high=True)
+
+
+@dataclass
+class OptimizerConfig(Target):
+    """A ``torch.optim`` optimiser; the trainer passes the parameters."""
+
+    lr: float = positive()
+
+
+@dataclass
+class CosineScheduleConfig(Target):
+    """``CosineAnnealingLR``; the trainer passes the optimiser and ``T_max`` (the run's updates)."""
+
+    eta_min: float = _ranged(ge=0.0)
+
+
+@dataclass
+class StepScheduleConfig(Target):
+    """``StepLR``; the trainer passes the optimiser."""
+
+    step_size: int = at_least()
+    gamma: float = unit_interval(open_low=True)
+
+
+@dataclass
+class SoftUpdateConfig(Target):
+    """TorchRL's ``SoftUpdate`` (Polyak averaging of the target networks)."""
+
+    tau: float = unit_interval(open_low=True)
+
+
+@dataclass
+class ValueEstimatorConfig:
+    """Keyword arguments of ``LossModule.make_value_estimator``."""
+
+    gamma: float = unit_interval()
+
+
+@dataclass
+class SACStyleLossConfig(Target):
+    """``SQILLoss`` (and the SAC arguments ``IQLearnLoss`` shares)."""
+
+    alpha_init: float = positive()
+    min_alpha: float = positive()
+    max_alpha: float = positive()
+    target_entropy: Any = MISSING  # "auto" (-|A|) or a number
+    absorbing: bool = MISSING  # absorbing states after termination, for expert and policy data
+
+
+class IQLearnVariant(str, enum.Enum):
+    """``IQLearnLoss(variant=...)``: the paper's Algorithm 3, or Garg et al.'s online objective.
+
+    A ``str`` enum, so the instantiated loss receives a value equal to its string."""
+
+    paper = "paper"
+    iq_learn = "iq_learn"
+
+
+@dataclass
+class IQLearnLossConfig(SACStyleLossConfig):
+    num_value_samples: int = at_least()
+    variant: IQLearnVariant = MISSING
+
+
+@dataclass
+class HuberBCLossConfig(Target):
+    delta: float = positive()
+
+
+class GAILReward(str, enum.Enum):
+    """``make_gail_losses(reward=...)``: the discriminator's logit, or ``-log(1 - D)``."""
+
+    logit = "logit"
+    positive = "positive"
+
+
+@dataclass
+class GAILLossConfig(Target):
+    """``make_gail_losses``: the discriminator and PPO settings."""
+
+    gamma: float = unit_interval()
+    gae_lambda: float = unit_interval()
+    clip_epsilon: float = positive()
+    entropy_coeff: float = _ranged(ge=0.0)
+    critic_coeff: float = _ranged(ge=0.0)
+    gp_lambda: float = _ranged(ge=0.0)
+    normalize_advantage: bool = MISSING
+    reward: GAILReward = MISSING
+    absorbing: bool = MISSING
+
+
+# ---------------------------------------------------------------------- groups
+
+
+@dataclass
+class PaperFamilyConfig:
+    """Appendix E's hyperparameters that differ between the environment families."""
+
+    window_k: int = at_least(0)
+    utd_ratio: float = positive()
+    iq_value_samples: int = at_least()
+    ppo_epochs: int = at_least()
+    episodes_per_round: int = at_least()
+    gail_rounds: int = at_least()
+    bc_epochs: int = at_least()
+    bc_patience: int = at_least()
+
+
+@dataclass
+class EnvConfig:
+    """A confounded env: ``make`` is instantiated with ``regime``, ``batch_size``,
+    ``horizon``, ``confounding_strength`` and ``seed``; ``expert`` with the env."""
+
+    name: str = MISSING
+    horizon: int = at_least()
+    confounding_strength: float = unit_interval()
+    window_k: int = at_least(0)
+    position_key: Optional[str] = None
+    make: Any = MISSING
+    expert: Any = MISSING  # null: none yet (training refuses the env)
+    paper: PaperFamilyConfig = MISSING
+
+
+class WindowMode(enum.Enum):
+    exact = "exact"
+    relaxed = "relaxed"
+
+
+@dataclass
+class WindowConfig:
+    """Arguments of ``CausalWindowTransform.from_env`` (``causal`` is the top-level key)."""
+
+    k: int = at_least(0)
+    mode: WindowMode = MISSING
+    window_matched: bool = MISSING
+
+
+@dataclass
+class EvalConfig:
+    episodes: int = at_least()
+    final_episodes: int = at_least()
+    num_envs: int = at_least()
+    trajectories: int = at_least(0)
+
+
+@dataclass
+class DemosConfig:
+    episodes: int = at_least()
+    seed: int = at_least(0)
+    path: str = MISSING
+
+
+@dataclass
+class LoggerConfig(Target):
+    """A TorchRL logger; the run directory passes ``log_dir``."""
+
+    exp_name: str = MISSING
+
+
+@dataclass
+class AlgoConfig:
+    """What every algorithm has: its name and the trainer class (``None``: nothing to
+    train, the expert)."""
+
+    name: str = MISSING
+    trainer: Optional[str] = MISSING
+
+
+@dataclass
+class TrainedAlgoConfig(AlgoConfig):
+    eval_every: int = at_least()
+
+
+@dataclass
+class BCConfig(TrainedAlgoConfig):
+    actor: ResidualMLPConfig = MISSING
+    loss: HuberBCLossConfig = MISSING
+    optimizer: OptimizerConfig = MISSING
+    batch_size: int = at_least()
+    epochs: int = at_least()
+    patience: int = at_least()
+    val_fraction: float = unit_interval(open_low=True, open_high=True)
+
+
+@dataclass
+class GAILConfig(TrainedAlgoConfig):
+    actor: ResidualMLPConfig = MISSING
+    value: MLPConfig = MISSING
+    discriminator: DiscriminatorConfig = MISSING
+    loss: GAILLossConfig = MISSING
+    actor_optimizer: OptimizerConfig = MISSING
+    critic_optimizer: OptimizerConfig = MISSING
+    discriminator_optimizer: OptimizerConfig = MISSING
+    discriminator_scheduler: StepScheduleConfig = MISSING
+    batch_size: int = at_least()
+    max_grad_norm: float = positive()
+    ppo_epochs: int = at_least()
+    discriminator_updates: int = at_least()
+    discriminator_batch_size: int = at_least()
+    episodes_per_round: int = at_least()
+    rounds: int = at_least()
+
+
+@dataclass
+class OffPolicyConfig(TrainedAlgoConfig):
+    actor: ResidualMLPConfig = MISSING
+    critic: ResidualMLPConfig = MISSING
+    loss: SACStyleLossConfig = MISSING
+    value_estimator: ValueEstimatorConfig = MISSING
+    target_update: SoftUpdateConfig = MISSING
+    actor_optimizer: OptimizerConfig = MISSING
+    critic_optimizer: OptimizerConfig = MISSING
+    alpha_optimizer: OptimizerConfig = MISSING
+    critic_scheduler: Optional[CosineScheduleConfig] = MISSING  # None: a constant learning rate
+    batch_size: int = at_least(2)
+    max_grad_norm: float = positive()
+    buffer_size: int = at_least()
+    expert_ratio: float = unit_interval(open_low=True, open_high=True)
+    random_steps: int = at_least(0)
+    utd_ratio: float = positive()
+    total_steps: int = at_least()
+    num_envs: int = at_least()
+    frames_per_batch: int = at_least()
+
+
+@dataclass
+class IQLearnConfig(OffPolicyConfig):
+    loss: IQLearnLossConfig = MISSING
+
+
+@dataclass
+class Config:
+    """The top level of ``configs/config.yaml``."""
+
+    env: EnvConfig = MISSING
+    algo: AlgoConfig = MISSING
+    window: WindowConfig = MISSING
+    eval: EvalConfig = MISSING
+    demos: DemosConfig = MISSING
+    logger: LoggerConfig = MISSING
+    seed: int = at_least(0)
+    causal: bool = MISSING
+    device: str = "cpu"  # cpu | cuda | cuda:N | mps | auto; validate_config checks this machine has it
+    compile: bool = MISSING
+    log_every: int = at_least()
+    collector_workers: int = at_least()  # must divide algo.num_envs (off-policy)
+    threads: int = at_least()
+    resume: bool = MISSING
+    progress_bar: bool = MISSING
+    checkpoint_every_s: float = _ranged(ge=0.0)  # 0: after every training iteration
+    run_root: str = MISSING
+    run_name: str = MISSING
+    run_dir: str = MISSING
+
+
+#: Schema of each ``configs/algo`` option, stored in the ``algo`` group as ``schema_<name>``.
+ALGO_SCHEMAS: dict[str, type[AlgoConfig]] = {
+    "expert": AlgoConfig,
+    "bc": BCConfig,
+    "gail": GAILConfig,
+    "sqil": OffPolicyConfig,
+    "iq_learn": IQLearnConfig,
+}
+
+
+def register_configs() -> None:
+    """Stores the schemas in Hydra's ConfigStore (idempotent): ``schema`` for the top
+    level, ``schema_<algo>`` in the ``algo`` group."""
+    store = ConfigStore.instance()
+    store.store(name="schema", node=Config)
+    for name, schema in ALGO_SCHEMAS.items():
+        store.store(group="algo", name=f"schema_{name}", node=schema)
+
+
+# ---------------------------------------------------------------------- ranges
+
+
+def _check_ranges(node: DictConfig, where: str) -> None:
+    schema = OmegaConf.get_type(node)
+    if schema is None or not dataclasses.is_dataclass(schema):
+        return
+    for spec in dataclasses.fields(schema):
+        value = node[spec.name]
+        key = f"{where}{spec.name}"
+        if isinstance(value, DictConfig):
+            _check_ranges(value, f"{key}.")
+            continue
+        for bound, limit in spec.metadata.items():
+            if value is None or isinstance(value, bool) or not isinstance(value, (int, float)):
+                continue
+            if math.isnan(value) or not _BOUND_TEST[bound](float(value), float(limit)):
+                raise ConfigValueError(f"config value {key}={value!r} is out of range: it must be {_BOUND_TEXT[bound]} {limit:g}")
+
+
+def _check_expert(cfg: DictConfig) -> None:
+    if cfg.env.expert is None:
+        raise ConfigValueError(
+            f"env {cfg.env.name!r} has no expert (env.expert is null), and every algorithm needs one "
+            "(demonstrations, or the expert row). HumanoidMaze's expert needs OGBench's humanoid locomotion "
+            "skill (~40M env steps), which this library does not ship yet; pass your own with "
+            "env.expert._target_=<module.Class taking the env>.")
+
+
+def _check_device(cfg: DictConfig) -> None:
+    try:
+        resolve_device(cfg.device)
+    except ValueError as error:
+        raise ConfigValueError(str(error)) from None
+
+
+def _check_algorithm(cfg: DictConfig) -> None:
+    """What one algorithm needs beyond the ranges of its fields."""
+    algo, schema = cfg.algo, OmegaConf.get_type(cfg.algo)
+    if schema is GAILConfig and algo.actor.dropout != 0:
+        raise ConfigValueError(f"algo.actor.dropout must be 0 for GAIL, got {algo.actor.dropout}: PPO's probability "
+                               "ratio needs the actor that collected the rollout, not a copy with a fresh dropout mask")
+    if not issubclass(schema, OffPolicyConfig):
+        return
+    if algo.random_steps % algo.frames_per_batch:
+        raise ConfigValueError(f"algo.random_steps={algo.random_steps} must be a multiple of algo.frames_per_batch="
+                               f"{algo.frames_per_batch}: random actions are drawn for whole collector batches")
+    if algo.num_envs % cfg.collector_workers:
+        raise ConfigValueError(f"collector_workers={cfg.collector_workers} must divide algo.num_envs={algo.num_envs}: "
+                               "each worker process steps the same number of envs")
+
+
+def _check_target_entropy(cfg: DictConfig) -> None:
+    value = OmegaConf.select(cfg, "algo.loss.target_entropy")
+    if value is not None and value != "auto" and (isinstance(value, bool) or not isinstance(value, (int, float))):
+        raise ConfigValueError(f"config value algo.loss.target_entropy={value!r} must be 'auto' or a number")
+
+
+def validate_config(cfg: DictConfig) -> None:
+    """Resolves every interpolation of a composed config and checks every range.
+
+    Raises:
+        ConfigValueError: naming the key, its value and the allowed range; a device this
+            machine lacks; GAIL's actor with dropout; off-policy counts that do not
+            divide (``random_steps`` by ``frames_per_batch``, ``num_envs`` by
+            ``collector_workers``); or the env without an expert.
+        omegaconf.errors.OmegaConfBaseException: an interpolation that does not resolve or
+            a mandatory value left unset, naming the key.
+
+    Examples:
+        >>> from torchrl_causal.trainers.config import compose_config
+        >>> validate_config(compose_config(["eval.final_episodes=0"]))
+        Traceback (most recent call last):
+        ...
+        torchrl_causal.trainers.schema.ConfigValueError: config value eval.final_episodes=0 is out of range: it must be >= 1
+    """
+    OmegaConf.to_container(cfg, resolve=True, throw_on_missing=True)
+    _check_ranges(cfg, "")
+    _check_device(cfg)
+    _check_algorithm(cfg)
+    _check_target_entropy(cfg)
+    _check_expert(cfg)
