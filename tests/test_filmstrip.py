@@ -48,3 +48,25 @@ def test_refuses_batches_and_envs_that_cannot_render():
     rover = RoverMazeEnv(batch_size=[1], seed=0)
     with pytest.raises(TypeError, match="cannot render"):
         record_filmstrip(rover, lambda td: td, max_steps=5)
+
+
+def test_cli_draws_one_row_per_run_from_the_same_start(tmp_path, capsys):
+    from torchrl_causal.filmstrip import filmstrip_of_run, main
+    from torchrl_causal.train import run
+    from torchrl_causal.trainers import compose_config
+
+    tiny = ["env=antmaze_medium", "env.horizon=30", "window.k=2", f"run_root={tmp_path}", "progress_bar=false",
+            "demos.episodes=2", "eval.episodes=1", "eval.num_envs=1", "eval.final_episodes=1"]
+    bc = compose_config([*tiny, "algo=bc", "causal=true", "algo.actor.hidden=16", "algo.actor.num_blocks=1",
+                         "algo.epochs=1", "algo.eval_every=1", "algo.batch_size=16"])
+    expert = compose_config([*tiny, "algo=expert", "causal=false"])
+    for cfg in (bc, expert):
+        run(cfg)
+    out = tmp_path / "strip.png"
+    main([f"runs=[{bc.run_dir},{expert.run_dir}]", "labels=[C-BC,Expert]", f"out={out}", "frames=2", "every=15",
+          "size=32"])
+    assert out.is_file() and "C-BC:" in capsys.readouterr().out
+    starts = [filmstrip_of_run(cfg.run_dir, frames=2, every=30, size=32).frames[0] for cfg in (bc, expert)]
+    np.testing.assert_array_equal(*starts)  # one seed: every row starts from the same state
+    with pytest.raises(SystemExit, match="labels"):
+        main([f"runs=[{bc.run_dir}]", "labels=[a,b]", f"out={out}"])

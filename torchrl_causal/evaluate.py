@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from omegaconf import OmegaConf
+from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.metrics import EvaluationResult
@@ -28,7 +29,7 @@ from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.trainers.device import resolve_device
 from torchrl_causal.trainers.run_directory import RunDirectory
 
-__all__ = ["evaluate_run", "record_settings", "main"]
+__all__ = ["evaluate_run", "open_run", "record_settings", "main"]
 
 _ARGS = {"run_dir", "regime", "episodes", "num_envs", "seed", "confounding_strength", "save", "trajectories", "device"}
 
@@ -44,10 +45,11 @@ def record_settings(episodes: int, seed: int, num_envs: int, confounding_strengt
     return name if confounding_strength is None else f"{name}-cs{confounding_strength:g}"
 
 
-def evaluate_run(run_dir: str | Path, regime: str = "deploy", episodes: int = 1000, *, num_envs: int | None = None,
-                 seed: int = 30_000, confounding_strength: float | None = None, trajectories: int = 0,
-                 save: bool = True, device: str | None = None) -> EvaluationResult:
-    """Evaluates the selected policy of ``run_dir`` (see the module docstring).
+def open_run(run_dir: str | Path, *, confounding_strength: float | None = None,
+             device: str | None = None) -> tuple[RunDirectory, Evaluator, TensorDictModuleBase | None]:
+    """The run directory, an :class:`Evaluator` of its config and its selected policy
+    (``checkpoints/best.pt``; ``None`` for the expert row, which the evaluator rebuilds
+    from each env).
 
     Raises:
         ValueError: naming ``device`` when it is given and this machine lacks it.
@@ -64,10 +66,21 @@ def evaluate_run(run_dir: str | Path, regime: str = "deploy", episodes: int = 10
             resolve_device(cfg.device)
         except ValueError:
             cfg.device = "cpu"
-    num_envs = min(int(num_envs or cfg.eval.num_envs), int(episodes))
     window = AdjustmentWindow.from_dict(json.loads(run.window_file.read_text())) if cfg.algo.trainer else None
     evaluator = Evaluator(cfg, window, progress=True)
-    policy = evaluator.load_best_policy(run) if window is not None else None
+    return run, evaluator, evaluator.load_best_policy(run) if window is not None else None
+
+
+def evaluate_run(run_dir: str | Path, regime: str = "deploy", episodes: int = 1000, *, num_envs: int | None = None,
+                 seed: int = 30_000, confounding_strength: float | None = None, trajectories: int = 0,
+                 save: bool = True, device: str | None = None) -> EvaluationResult:
+    """Evaluates the selected policy of ``run_dir`` (see the module docstring).
+
+    Raises:
+        ValueError: naming ``device`` when it is given and this machine lacks it.
+    """
+    run, evaluator, policy = open_run(run_dir, confounding_strength=confounding_strength, device=device)
+    num_envs = min(int(num_envs or evaluator.cfg.eval.num_envs), int(episodes))
     result = evaluator.evaluate(policy, regime, int(episodes), int(seed), trajectories=int(trajectories),
                                 num_envs=num_envs)
     if save:
