@@ -64,24 +64,25 @@ TARGETS = {("cuda", "SQILLoss"): ("updates/s", 300.0), ("cpu", "IQLearnLoss K=16
            ("cuda", "IQLearnLoss K=16"): ("ratio", 0.9)}
 
 
-def make_batch(device: torch.device, generator: torch.Generator) -> TensorDict:
+def make_batch(device: torch.device, generator: torch.Generator, observation_dim: int = OBSERVATION_DIM) -> TensorDict:
     expert = (torch.arange(BATCH) < BATCH // 2).unsqueeze(-1)
     return TensorDict({
-        "observation": torch.randn(BATCH, OBSERVATION_DIM, generator=generator),
+        "observation": torch.randn(BATCH, observation_dim, generator=generator),
         "action": torch.rand(BATCH, ACTION_DIM, generator=generator) * 2 - 1,
         "expert": expert,
-        "next": {"observation": torch.randn(BATCH, OBSERVATION_DIM, generator=generator),
+        "next": {"observation": torch.randn(BATCH, observation_dim, generator=generator),
                  "reward": expert.float(),  # read by plain SACLoss only
                  "done": torch.zeros(BATCH, 1, dtype=torch.bool),
                  "terminated": torch.zeros(BATCH, 1, dtype=torch.bool)},
     }, [BATCH]).to(device)
 
 
-def make_update(name: str, device: torch.device, compile: bool) -> ActorCriticUpdate:
+def make_update(name: str, device: torch.device, compile: bool, *, observation_dim: int = OBSERVATION_DIM,
+                hidden: int = HIDDEN, num_blocks: int = BLOCKS) -> ActorCriticUpdate:
     torch.manual_seed(0)
     spec = Bounded(-1.0, 1.0, shape=(ACTION_DIM,))
-    actor = make_tanh_gaussian_actor(OBSERVATION_DIM, spec, hidden=HIDDEN, num_blocks=BLOCKS, dropout=0.05)
-    critic = make_qvalue_network(OBSERVATION_DIM, spec, hidden=HIDDEN, num_blocks=BLOCKS)
+    actor = make_tanh_gaussian_actor(observation_dim, spec, hidden=hidden, num_blocks=num_blocks, dropout=0.05)
+    critic = make_qvalue_network(observation_dim, spec, hidden=hidden, num_blocks=num_blocks)
     loss = LOSSES[name](actor.to(device), critic.to(device))
     loss.make_value_estimator(gamma=0.99)
     adam = partial(torch.optim.Adam, lr=3e-4)
