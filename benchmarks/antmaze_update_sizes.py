@@ -3,8 +3,8 @@ paper's 256 x 3 in the same run: why ``scale=cpu_ant`` uses 128 x 2 networks.
 
     OMP_NUM_THREADS=1 python benchmarks/antmaze_update_sizes.py
 
-The input is Confounded AntMaze's causal window at k = 10 (377 dims: 27 state dims at
-lags 0..10, 8 action dims at lags 1..10); the batch, the losses and the update step are
+The input is Confounded AntMaze's causal window at k = 10 (355 dims: 25 state dims at
+lags 0..10, W excluded, 8 action dims at lags 1..10); the batch, the losses and the update step are
 ``gpu_throughput.py``'s. Each figure is the median over rounds; the ratio is against
 256 x 3 within each round.
 """
@@ -18,7 +18,7 @@ import torch
 
 from gpu_throughput import make_batch, make_update, timed_rate
 
-ANTMAZE_WINDOW_DIM = 27 * 11 + 8 * 10
+ANTMAZE_WINDOW_DIM = 25 * 11 + 8 * 10
 SIZES = ((256, 3), (128, 2), (64, 2))
 
 
