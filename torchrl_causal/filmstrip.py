@@ -19,7 +19,6 @@ from omegaconf import OmegaConf
 
 from torchrl_causal.evaluate import open_run
 from torchrl_causal.evaluation.filmstrip import Filmstrip, record_filmstrip, save_filmstrips
-from torchrl_causal.trainers.builders import make_expert
 
 __all__ = ["filmstrip_of_run", "main"]
 
@@ -32,7 +31,9 @@ def filmstrip_of_run(run_dir: str | Path, *, regime: str = "deploy", seed: int =
     _, evaluator, policy = open_run(run_dir, device="cpu")
     env = evaluator.make_env(regime, 1, seed)
     try:
-        acting = make_expert(evaluator.cfg, env) if policy is None else policy.eval()
+        if policy is not None:
+            policy.eval()  # no dropout
+        acting = evaluator.acting_policy(policy, env)
         return record_filmstrip(env, acting, max_steps=evaluator.cfg.env.horizon, frames=frames, every=every,
                                 width=size, height=size, camera=camera)
     finally:

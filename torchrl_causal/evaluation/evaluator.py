@@ -76,6 +76,10 @@ class Evaluator:
             return make_env(self.cfg, regime, batch_size, seed)
         return make_imitator_env(self.cfg, self.window, regime, batch_size, seed)
 
+    def acting_policy(self, policy: Policy | None, env: EnvBase) -> Policy:
+        """``policy``, or for ``None`` the env's expert built on ``env`` (it reads that env's latent state)."""
+        return make_expert(self.cfg, env) if policy is None else policy
+
     def evaluate(self, policy: Policy | None, regime: str, episodes: int, seed: int, *, trajectories: int = 0,
                  num_envs: int | None = None) -> EvaluationResult:
         """Runs ``policy`` in eval mode (no dropout, deterministic actions) for ``episodes``
@@ -86,7 +90,7 @@ class Evaluator:
         through :func:`~torchrl_causal.trainers.device.for_cpu_env` (the env steps on the CPU).
         """
         env = self.make_env(regime, min(num_envs or self.cfg.eval.num_envs, episodes), seed)
-        acting = make_expert(self.cfg, env) if policy is None else policy
+        acting = self.acting_policy(policy, env)
         was_training = getattr(acting, "training", None)  # scripted experts may be plain callables
         if was_training is not None:
             acting.eval()

@@ -4,7 +4,6 @@ goal)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -14,13 +13,12 @@ matplotlib.use("Agg")  # strips are written on headless machines
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-from tensordict import TensorDictBase  # noqa: E402
 from torchrl.envs import EnvBase, TransformedEnv  # noqa: E402
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp  # noqa: E402
 
-__all__ = ["Filmstrip", "record_filmstrip", "save_filmstrips"]
+from torchrl_causal.evaluation.metrics import Policy  # noqa: E402
 
-Policy = Callable[[TensorDictBase], TensorDictBase]
+__all__ = ["Filmstrip", "record_filmstrip", "save_filmstrips"]
 
 
 @dataclass(frozen=True)
