@@ -265,9 +265,11 @@ def test_entry_point_composes_from_any_directory(tmp_path) -> None:
     assert cfg.algo.name == "gail" and cfg.env.name == "route_choice" and cfg.window.k == 0
 
 
-def test_the_demo_runs_validate() -> None:
-    from torchrl_causal.demo import DEMO_ALGOS, DEMO_RUNS, DEMO_SETTINGS
+def test_the_demo_runs_validate(tmp_path) -> None:
+    from torchrl_causal.demo import DEMO_RUNS, demo_overrides
 
-    for task, algo, causal in DEMO_RUNS:
-        validate_config(compose_config(["scale=cpu", *DEMO_SETTINGS[task], f"algo={algo}", *DEMO_ALGOS[algo],
-                                        f"causal={str(causal).lower()}"]))
+    # the main job shows the paper's method against its twin, and BC against C-BC
+    assert {("sqil", True), ("sqil", False), ("bc", True), ("bc", False)} <= set(DEMO_RUNS)
+    assert DEMO_RUNS[0] == ("expert", False)  # its demonstrations feed the others
+    for algo, causal in DEMO_RUNS:
+        validate_config(compose_config(demo_overrides(algo, causal, tmp_path)))
