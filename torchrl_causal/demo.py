@@ -71,9 +71,10 @@ def _run_one(overrides: list[str]) -> int:
     Runs in a worker process: a :class:`RunInterrupted` is turned into its exit status here
     because the exception does not survive pickling back to the parent.
     """
-    logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stdout, force=True)
     cfg = compose_config(overrides)
-    print(f"=== {cfg.algo.name}{' (causal)' if cfg.causal else ''}: {cfg.run_dir} ===", flush=True)
+    label = Path(cfg.run_dir).parent.name  # runs interleave two at a time: tag each line
+    logging.basicConfig(level=logging.INFO, format=f"{label:>6} | %(message)s", stream=sys.stdout, force=True)
+    print(f"=== {label}: {cfg.run_dir} ===", flush=True)
     try:
         run(cfg)
     except RunInterrupted as stop:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from functools import partial
 
 import torch.nn.functional as F
-from tensordict.nn import TensorDictModule
+from tensordict.nn import TensorDictModule, TensorDictParams
 from torchrl.objectives import BCLoss
 
 __all__ = ["HuberBCLoss"]
@@ -43,6 +43,10 @@ class HuberBCLoss(BCLoss):
         torch.Size([])
         >>> out["loss_bc"].backward()
     """
+
+    # BCLoss does not declare what convert_to_functional creates, so TorchRL warns on
+    # every construction; declaring the target name here silences that (BC has no target).
+    target_actor_network_params: TensorDictParams | None
 
     def __init__(self, actor_network: TensorDictModule, *, delta: float = 1.0, reduction: str | None = None) -> None:
         if not delta > 0:
