@@ -1,0 +1,74 @@
+"""The strength ablation re-evaluates trained runs: a policy that does not read the compass
+is unaffected by any strength, strength 0 is the train regime, records are reused."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+import torchrl_causal.strength_ablation as ablation
+from torchrl_causal.evaluate import evaluate_run
+from torchrl_causal.train import run
+from torchrl_causal.trainers import compose_config
+
+EPISODES = 8
+TINY_BC = ["env=rovermaze_u", "env.horizon=40", "window.k=2", "algo=bc", "progress_bar=false", "threads=1",
+           "demos.episodes=6", "eval.episodes=4", "eval.num_envs=4", "eval.final_episodes=4", "algo.actor.hidden=16",
+           "algo.actor.num_blocks=1", "algo.epochs=2", "algo.batch_size=64", "algo.eval_every=2"]
+
+
+@pytest.fixture(scope="module")
+def runs_root(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("strength") / "runs"
+    for causal in (True, False):
+        run(compose_config([*TINY_BC, f"causal={str(causal).lower()}", f"run_root={root}"]))
+    return root
+
+
+def _by_label(records):
+    return {(r.label, r.setting.strength): r.evaluations["deploy"] for r in records}
+
+
+def test_a_causal_policy_is_the_same_at_every_strength_and_strength_zero_is_training(runs_root: Path) -> None:
+    results = _by_label(ablation.strength_ablation(runs_root, (0.0, 0.5, 1.0), EPISODES))
+    assert {label for label, _ in results} == {"c_bc", "bc"}
+    # C-BC's window excludes W: the rotated compass changes nothing it reads
+    assert results["c_bc", 0.0].returns == results["c_bc", 0.5].returns == results["c_bc", 1.0].returns
+    # BC reads W: turning it changes the episodes
+    assert results["bc", 0.0].returns != results["bc", 1.0].returns
+    for label in ("c_bc", "bc"):
+        run_dir = next(p.parent for p in runs_root.rglob("config.yaml") if p.parent.parent.name == label)
+        train = evaluate_run(run_dir, "train", EPISODES, num_envs=4, save=False)
+        assert results[label, 0.0].returns == train.returns  # deploy at strength 0 is the train regime
+
+
+def test_stored_records_are_read_back_not_evaluated_again(runs_root: Path, monkeypatch) -> None:
+    first = _by_label(ablation.strength_ablation(runs_root, (0.85,), EPISODES))
+
+    def evaluate_again(*args, **kwargs):
+        raise AssertionError("re-evaluated a stored record")
+
+    monkeypatch.setattr(ablation, "evaluate_run", evaluate_again)
+    again = _by_label(ablation.strength_ablation(runs_root, (0.85,), EPISODES))
+    assert {key: r.returns for key, r in again.items()} == {key: r.returns for key, r in first.items()}
+    assert len(list(runs_root.rglob("deploy-n8-seed30000-envs4-cs0.85.json"))) == 2
+
+
+def test_the_report_has_one_row_per_algorithm_and_a_figure(runs_root: Path, tmp_path: Path) -> None:
+    path = ablation.main([f"runs={runs_root}", "strengths=[0,1]", f"episodes={EPISODES}", f"out={tmp_path}",
+                          "name=ablation"])
+    text = path.read_text()
+    assert "| Algorithm | 0 | 1 |" in text and "| C-BC |" in text and "| BC |" in text
+    assert (tmp_path / "ablation.png").stat().st_size > 0
+    assert f"python -m torchrl_causal.strength_ablation runs={runs_root}" in text
+
+
+def test_bad_strengths_and_mixed_settings_are_refused(runs_root: Path, tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        ablation.strength_ablation(runs_root, (1.5,), EPISODES)
+    mixed = tmp_path / "mixed"
+    run(compose_config([*TINY_BC, "causal=true", "window.k=1", f"run_root={mixed}"]))
+    run(compose_config([*TINY_BC, "causal=true", f"run_root={mixed}"]))
+    with pytest.raises(ValueError, match="differ in more than the strength"):
+        ablation.strength_ablation(mixed, (1.0,), EPISODES)

@@ -1,0 +1,128 @@
+"""The confounding-strength ablation of trained runs (the paper's Appendix F):
+``python -m torchrl_causal.strength_ablation runs=<dir> [strengths=[0.15,0.5,0.85,1.0]]
+[episodes=1000] [seed=30000] [out=<dir>] [name=<str>]``.
+
+The strength only sets how far the deployment regime shifts the confounded sensor
+(the compass is rotated by ``strength * pi``); training never sees it. So the ablation is
+an evaluation, not new training: every run below ``runs`` (its selected policy,
+``checkpoints/best.pt``) is evaluated in the deploy regime at each strength with
+:func:`~torchrl_causal.evaluate.evaluate_run`, which keeps each record in
+``<run_dir>/eval/deploy-n<episodes>-seed<seed>-envs<n>-cs<strength>.json``. A record that
+already exists with the same settings is read back instead of evaluated again, so an
+interrupted ablation resumes and a finished one rewrites its report in seconds.
+
+Writes ``<out>/<name>.md`` (deploy success % ± SE per algorithm and strength, pooled over
+seeds, with the regenerating command) and ``<out>/<name>.png`` (success against strength,
+causal methods solid, non-causal dashed).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+
+from omegaconf import OmegaConf
+
+from torchrl_causal.evaluate import evaluate_run, record_settings
+from torchrl_causal.evaluation.metrics import EvaluationResult
+from torchrl_causal.evaluation.plots import plot_ablation
+from torchrl_causal.evaluation.runs import RunRecord, load_runs
+from torchrl_causal.evaluation.tables import aggregate, display_name, ordered_labels
+from torchrl_causal.trainers.run_directory import RunDirectory
+
+__all__ = ["PAPER_STRENGTHS", "deploy_at_strength", "strength_ablation", "strength_markdown", "main"]
+
+PAPER_STRENGTHS: tuple[float, ...] = (0.15, 0.5, 0.85, 1.0)  # Appendix F's strength ablation
+_ARGS = {"runs", "strengths", "episodes", "seed", "out", "name"}
+
+
+def deploy_at_strength(run_dir: str | Path, strength: float, episodes: int, seed: int = 30_000) -> EvaluationResult:
+    """The deploy-regime evaluation of ``run_dir`` at ``strength``: its stored record when one
+    with these settings exists, else a new evaluation (which stores it)."""
+    run = RunDirectory(run_dir)
+    num_envs = min(int(run.read_config().eval.num_envs), int(episodes))
+    record = run.eval_path("deploy", record_settings(int(episodes), int(seed), num_envs, float(strength)))
+    if record.is_file():
+        return EvaluationResult.from_dict(run.read_json(record))
+    return evaluate_run(run_dir, "deploy", int(episodes), num_envs=num_envs, seed=int(seed),
+                        confounding_strength=float(strength))
+
+
+def strength_ablation(runs_root: str | Path, strengths: Sequence[float] = PAPER_STRENGTHS, episodes: int = 1000,
+                      seed: int = 30_000) -> list[RunRecord]:
+    """One record per run and strength, its setting's ``strength`` set to the evaluated one
+    and its only evaluation the deploy regime there (ready for
+    :func:`~torchrl_causal.evaluation.tables.aggregate`).
+
+    Raises:
+        FileNotFoundError: no evaluated run below ``runs_root``.
+        ValueError: a strength outside [0, 1], or runs of more than one task / horizon / window.
+    """
+    runs = load_runs(runs_root)
+    if not runs:
+        raise FileNotFoundError(f"no evaluated runs below {runs_root} (expected */config.yaml with eval/*.json)")
+    settings = {run.setting._replace(strength=0.0) for run in runs}
+    if len(settings) > 1:
+        raise ValueError(f"runs below {runs_root} differ in more than the strength: {sorted(settings)}; "
+                         "point runs= at one setting's folder")
+    bad = [s for s in strengths if not 0.0 <= float(s) <= 1.0]
+    if bad:
+        raise ValueError(f"strengths must lie in [0, 1], got {bad}")
+    return [
+        replace(run, setting=run.setting._replace(strength=float(strength)), curve=(),
+                evaluations={"deploy": deploy_at_strength(run.path, strength, episodes, seed)})
+        for run in runs for strength in strengths
+    ]
+
+
+def strength_markdown(records: Sequence[RunRecord]) -> str:
+    """Deploy success % ± SE, one row per algorithm, one column per strength."""
+    aggregated = aggregate(records)
+    settings = sorted(aggregated, key=lambda s: s.strength)
+    labels = ordered_labels({label for table in aggregated.values() for label in table})
+    lines = ["| Algorithm | " + " | ".join(f"{s.strength:g}" for s in settings) + " |",
+             "|---|" + "---|" * len(settings)]
+    for label in labels:
+        cells = []
+        for setting in settings:
+            result = aggregated[setting].get(label, {}).get("deploy")
+            cells.append("—" if result is None else f"{100 * result.success_rate:.1f} ± {100 * result.success_se:.1f}")
+        lines.append(f"| {display_name(label)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> Path:
+    args = OmegaConf.from_cli(list(sys.argv[1:] if argv is None else argv))
+    unknown = set(args) - _ARGS
+    if unknown or "runs" not in args:
+        raise SystemExit("usage: python -m torchrl_causal.strength_ablation runs=<dir> [strengths=[0.15,0.5,0.85,1.0]] "
+                         "[episodes=1000] [seed=30000] [out=<dir>] [name=<str>]"
+                         + (f"; unknown argument(s) {sorted(unknown)}" if unknown else ""))
+    strengths = [float(s) for s in args.get("strengths", PAPER_STRENGTHS)]
+    episodes, seed = int(args.get("episodes", 1000)), int(args.get("seed", 30_000))
+    records = strength_ablation(args.runs, strengths, episodes, seed)
+    out = Path(args.get("out", Path(args.runs) / "report"))
+    out.mkdir(parents=True, exist_ok=True)
+    name = args.get("name", "strength_ablation")
+    figure = plot_ablation(aggregate(records), "strength", out / f"{name}.png")
+    command = " ".join(["python -m torchrl_causal.strength_ablation", *(sys.argv[1:] if argv is None else argv)])
+    setting = records[0].setting
+    text = "\n".join([
+        f"# Confounding-strength ablation: {setting.env} (H={setting.horizon}, k={setting.k})", "",
+        "Regenerate with:", "", "```bash", command, "```", "",
+        f"Deploy-regime success rate (%) ± SE of each run's selected policy, {episodes} episodes per strength "
+        f"(evaluation seed {seed}), pooled over training seeds {sorted({r.seed for r in records})}. "
+        "Strength s rotates the compass by s·π at deployment; training is unchanged.", "",
+        strength_markdown(records), "",
+        *([f"![strength ablation]({figure.name})", ""] if figure is not None else []),
+    ])
+    path = out / f"{name}.md"
+    path.write_text(text)
+    print(text)
+    return path
+
+
+if __name__ == "__main__":
+    main()
