@@ -49,7 +49,7 @@ def test_stored_records_are_read_back_not_evaluated_again(runs_root: Path, monke
     def evaluate_again(*args, **kwargs):
         raise AssertionError("re-evaluated a stored record")
 
-    monkeypatch.setattr(ablation, "evaluate_run", evaluate_again)
+    monkeypatch.setattr("torchrl_causal.evaluate.open_run", evaluate_again)
     again = _by_label(ablation.strength_ablation(runs_root, (0.85,), EPISODES))
     assert {key: r.returns for key, r in again.items()} == {key: r.returns for key, r in first.items()}
     assert len(list(runs_root.rglob("deploy-n8-seed30000-envs4-cs0.85.json"))) == 2

@@ -31,7 +31,8 @@ from torchrl_causal.trainers.run_directory import RunDirectory
 
 __all__ = ["evaluate_run", "open_run", "record_settings", "main"]
 
-_ARGS = {"run_dir", "regime", "episodes", "num_envs", "seed", "confounding_strength", "save", "trajectories", "device"}
+_ARGS = {"run_dir", "regime", "episodes", "num_envs", "seed", "confounding_strength", "save", "reuse", "trajectories",
+         "device"}
 
 
 def record_settings(episodes: int, seed: int, num_envs: int, confounding_strength: float | None) -> str:
@@ -73,19 +74,23 @@ def open_run(run_dir: str | Path, *, confounding_strength: float | None = None,
 
 def evaluate_run(run_dir: str | Path, regime: str = "deploy", episodes: int = 1000, *, num_envs: int | None = None,
                  seed: int = 30_000, confounding_strength: float | None = None, trajectories: int = 0,
-                 save: bool = True, device: str | None = None) -> EvaluationResult:
-    """Evaluates the selected policy of ``run_dir`` (see the module docstring).
+                 save: bool = True, reuse: bool = False, device: str | None = None) -> EvaluationResult:
+    """Evaluates the selected policy of ``run_dir`` (see the module docstring); with
+    ``reuse=True`` a stored record of the same settings is returned instead.
 
     Raises:
         ValueError: naming ``device`` when it is given and this machine lacks it.
     """
+    stored = RunDirectory(run_dir)
+    num_envs = min(int(num_envs or stored.read_config().eval.num_envs), int(episodes))
+    record = stored.eval_path(regime, record_settings(int(episodes), int(seed), num_envs, confounding_strength))
+    if reuse and record.is_file():
+        return EvaluationResult.from_dict(stored.read_json(record))
     run, evaluator, policy = open_run(run_dir, confounding_strength=confounding_strength, device=device)
-    num_envs = min(int(num_envs or evaluator.cfg.eval.num_envs), int(episodes))
     result = evaluator.evaluate(policy, regime, int(episodes), int(seed), trajectories=int(trajectories),
                                 num_envs=num_envs)
     if save:
-        settings = record_settings(int(episodes), int(seed), num_envs, confounding_strength)
-        run.write_json(run.eval_path(regime, settings), evaluator.record(result))
+        run.write_json(record, evaluator.record(result))
     return result
 
 
@@ -94,7 +99,7 @@ def main(argv: Sequence[str] | None = None) -> EvaluationResult:
     unknown = set(args) - _ARGS
     if unknown or "run_dir" not in args:
         raise SystemExit(f"usage: python -m torchrl_causal.evaluate run_dir=<dir> [regime=deploy] [episodes=1000] "
-                         f"[num_envs=...] [seed=...] [confounding_strength=...] [trajectories=0] [save=true] "
+                         f"[num_envs=...] [seed=...] [confounding_strength=...] [trajectories=0] [save=true] [reuse=false] "
                          f"[device=...]"
                          + (f"; unknown argument(s) {sorted(unknown)}" if unknown else ""))
     result = evaluate_run(**{k: args[k] for k in args})

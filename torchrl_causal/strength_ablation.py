@@ -25,29 +25,15 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from torchrl_causal.evaluate import evaluate_run, record_settings
-from torchrl_causal.evaluation.metrics import EvaluationResult
+from torchrl_causal.evaluate import evaluate_run
 from torchrl_causal.evaluation.plots import plot_ablation
 from torchrl_causal.evaluation.runs import RunRecord, load_runs
 from torchrl_causal.evaluation.tables import aggregate, display_name, ordered_labels
-from torchrl_causal.trainers.run_directory import RunDirectory
 
-__all__ = ["PAPER_STRENGTHS", "deploy_at_strength", "strength_ablation", "strength_markdown", "main"]
+__all__ = ["PAPER_STRENGTHS", "strength_ablation", "strength_markdown", "main"]
 
 PAPER_STRENGTHS: tuple[float, ...] = (0.15, 0.5, 0.85, 1.0)  # Appendix F's strength ablation
 _ARGS = {"runs", "strengths", "episodes", "seed", "out", "name"}
-
-
-def deploy_at_strength(run_dir: str | Path, strength: float, episodes: int, seed: int = 30_000) -> EvaluationResult:
-    """The deploy-regime evaluation of ``run_dir`` at ``strength``: its stored record when one
-    with these settings exists, else a new evaluation (which stores it)."""
-    run = RunDirectory(run_dir)
-    num_envs = min(int(run.read_config().eval.num_envs), int(episodes))
-    record = run.eval_path("deploy", record_settings(int(episodes), int(seed), num_envs, float(strength)))
-    if record.is_file():
-        return EvaluationResult.from_dict(run.read_json(record))
-    return evaluate_run(run_dir, "deploy", int(episodes), num_envs=num_envs, seed=int(seed),
-                        confounding_strength=float(strength))
 
 
 def strength_ablation(runs_root: str | Path, strengths: Sequence[float] = PAPER_STRENGTHS, episodes: int = 1000,
@@ -71,8 +57,9 @@ def strength_ablation(runs_root: str | Path, strengths: Sequence[float] = PAPER_
     if bad:
         raise ValueError(f"strengths must lie in [0, 1], got {bad}")
     return [
-        replace(run, setting=run.setting._replace(strength=float(strength)), curve=(),
-                evaluations={"deploy": deploy_at_strength(run.path, strength, episodes, seed)})
+        replace(run, setting=run.setting._replace(strength=float(strength)),
+                evaluations={"deploy": evaluate_run(run.path, "deploy", int(episodes), seed=int(seed),
+                                                    confounding_strength=float(strength), reuse=True)})
         for run in runs for strength in strengths
     ]
 
@@ -94,7 +81,8 @@ def strength_markdown(records: Sequence[RunRecord]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> Path:
-    args = OmegaConf.from_cli(list(sys.argv[1:] if argv is None else argv))
+    cli = list(sys.argv[1:] if argv is None else argv)
+    args = OmegaConf.from_cli(cli)
     unknown = set(args) - _ARGS
     if unknown or "runs" not in args:
         raise SystemExit("usage: python -m torchrl_causal.strength_ablation runs=<dir> [strengths=[0.15,0.5,0.85,1.0]] "
@@ -107,7 +95,7 @@ def main(argv: Sequence[str] | None = None) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     name = args.get("name", "strength_ablation")
     figure = plot_ablation(aggregate(records), "strength", out / f"{name}.png")
-    command = " ".join(["python -m torchrl_causal.strength_ablation", *(sys.argv[1:] if argv is None else argv)])
+    command = " ".join(["python -m torchrl_causal.strength_ablation", *cli])
     setting = records[0].setting
     text = "\n".join([
         f"# Confounding-strength ablation: {setting.env} (H={setting.horizon}, k={setting.k})", "",
