@@ -26,6 +26,7 @@ from torchrl_causal.evaluation import (
     write_report,
 )
 from torchrl_causal.evaluation.runs import eval_path
+from torchrl_causal.evaluation.tables import seed_spread, seeds_markdown
 from torchrl_causal.report import main as report_main
 
 # Appendix F, AntMaze-Medium column: raw E[Y] and success rate (%), deployment regime.
@@ -156,6 +157,23 @@ def test_seeds_pool_and_ablation_plots(tmp_path: Path) -> None:
     assert not any("ablation_horizon" in p.name for p in report.figures)
     with open(report.all_csv, newline="") as handle:
         assert sorted(int(r["k"]) for r in csv.DictReader(handle)) == [0, 0, 2, 2, 10, 10]
+
+
+def test_across_seeds_table_has_each_seed_and_the_seed_standard_error(tmp_path: Path) -> None:
+    for seed, deploy_success in ((0, 80.0), (1, 90.0), (2, 100.0)):
+        make_fake_run(tmp_path, "c_sqil", seed=seed, deploy=(-100.0, deploy_success), train=(-90.0, 90.0),
+                      episodes=100)
+    make_fake_run(tmp_path, "sqil", seed=0, deploy=(-300.0, 0.0), train=(-90.0, 95.0), episodes=100)
+    table = seeds_markdown(load_runs(tmp_path))
+    c_sqil = next(line for line in table.splitlines() if line.startswith("| C-SQIL"))
+    # deploy: mean 90, sample std 10, SE 10 / sqrt(3) = 5.77
+    assert c_sqil == "| C-SQIL | 90.0, 90.0, 90.0 | 90.0 ± 0.0 | 80.0, 90.0, 100.0 | 90.0 ± 5.8 |"
+    assert "| SQIL | 95.0 | 95.0 | 0.0 | 0.0 |" in table  # one seed: no spread
+    assert seed_spread([0.2, 0.4]) == pytest.approx((0.3, 0.1))
+    with pytest.raises(ValueError, match="at least one"):
+        seed_spread([])
+    report = write_report(tmp_path, tmp_path / "out")
+    assert "### Across seeds" in report.markdown.read_text()
 
 
 def test_notes_survive_regeneration_and_cli(paper_runs: Path, tmp_path: Path, capsys) -> None:

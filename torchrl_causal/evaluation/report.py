@@ -18,6 +18,7 @@ from torchrl_causal.evaluation.tables import (
     effect_markdown,
     lengths_markdown,
     raw_markdown,
+    seeds_markdown,
     table1_markdown,
     write_csv,
 )
@@ -107,12 +108,14 @@ def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, na
         lines += [f"## {setting.describe()}", "",
                   f"Seeds: {', '.join(map(str, seeds))}. Normalised E[Y] shifts the worst algorithm of the row to 0 "
                   "(the reward is purely negative); ± is the return's standard deviation and the success "
-                  "rate's standard error.", ""]
+                  "rate's standard error over the pooled episodes (as the paper's Table 1).", ""]
         for regime in ("deploy", "train"):
             if any(regime in regimes for regimes in table.values()):
                 lines += [f"### {regime.capitalize()} regime (Table 1 layout)", "", table1_markdown(table, regime), ""]
         lines += ["### Raw E[Y] and success rate", "", raw_markdown(table), "",
                   "### Mean length of successful episodes", "", lengths_markdown(table), ""]
+        if len(seeds) > 1:
+            lines += ["### Across seeds", "", seeds_markdown(r for r in runs if r.setting == setting), ""]
         checks = effect_checks(table)
         if checks:
             lines += ["### The paper's effect, checked", "", effect_markdown(checks), ""]
