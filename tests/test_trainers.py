@@ -7,6 +7,8 @@ from __future__ import annotations
 import json
 import random
 import signal
+import subprocess
+import sys
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -27,6 +29,7 @@ from torchrl_causal.trainers import (
     ConfigValueError,
     RunDirectory,
     RunInterrupted,
+    RunInUseError,
     Trainer,
     compose_config,
     load_checkpoint,
@@ -161,6 +164,28 @@ def test_resume_false_discards_the_previous_run(trained_runs, tmp_path: Path) ->
     run(tiny_config(tmp_path, "route_choice", "bc", True, "algo.optimizer.lr=0.01", "resume=false"))
     assert not (Path(cfg.run_dir) / "stale").exists()
     assert OmegaConf.load(Path(cfg.run_dir) / "config.yaml").algo.optimizer.lr == 0.01
+
+
+def test_a_run_held_by_another_process_is_refused_and_a_killed_holder_leaves_no_lock(tmp_path: Path) -> None:
+    cfg = tiny_config(tmp_path, "route_choice", "bc", True)
+    run_dir = Path(cfg.run_dir)
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time\n"
+         "from torchrl_causal.trainers import RunDirectory\n"
+         "with RunDirectory(sys.argv[1]).lock():\n"
+         "    print('held', flush=True)\n"
+         "    time.sleep(600)\n", str(run_dir)],
+        stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(RunInUseError, match=rf"pid {holder.pid} on "):
+            run(cfg)
+        assert sorted(p.name for p in run_dir.iterdir()) == [".lock"]  # refused before claiming the directory
+    finally:
+        holder.kill()  # SIGKILL: no cleanup code runs in the holder
+        holder.wait()
+    run(cfg)
+    assert json.loads((run_dir / "status.json").read_text())["status"] == "complete"
 
 
 def test_raising_the_budget_continues_a_finished_run(tmp_path: Path) -> None:

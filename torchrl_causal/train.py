@@ -8,7 +8,7 @@ directory exists. ``scale=paper`` selects Appendix E's networks and budgets,
 ``python -m torchrl_causal.train -m experiment=paper_table``.
 
 A run directory belongs to one config (a changed config is refused, naming the changed
-keys); rerunning the same command resumes an unfinished run from its last checkpoint
+keys) and to one process at a time (a second one is refused, naming the first); rerunning the same command resumes an unfinished run from its last checkpoint
 and returns a finished run's stored evaluations. Ctrl-C (SIGINT) or SIGTERM finishes
 the training step in flight, checkpoints, marks the run interrupted and prints the
 command that resumes it.
@@ -36,6 +36,7 @@ from torchrl_causal.trainers import (
     ConfigValueError,
     RunDirectory,
     RunInterrupted,
+    RunInUseError,
     Trainer,
     validate_config,
 )
@@ -91,15 +92,23 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
     Raises:
         ConfigValueError: a value out of range (nothing is written).
         ConfigMismatchError: ``cfg.run_dir`` holds a run of another config (nothing is written).
+        RunInUseError: another process is running ``cfg.run_dir`` (nothing is written).
         RunInterrupted: on SIGINT/SIGTERM, after checkpointing and marking the run interrupted.
     """
     validate_config(cfg)
     trainer_class: type[Trainer] | None = get_class(cfg.algo.trainer) if cfg.algo.trainer else None
     total = trainer_class.budget(cfg) if trainer_class else 0
     run_dir = RunDirectory(cfg.run_dir)
-    if not cfg.resume:
-        run_dir.discard()
     created = _first_missing(run_dir.path)  # what a failure before any checkpoint removes
+    with run_dir.lock():
+        if not cfg.resume:
+            run_dir.discard()
+            created = created or run_dir.path
+        return _claim_and_run(cfg, run_dir, trainer_class, total, created)
+
+
+def _claim_and_run(cfg: DictConfig, run_dir: RunDirectory, trainer_class: type[Trainer] | None, total: int,
+                   created: Path | None) -> dict[str, EvaluationResult]:
     extendable = trainer_class is not None and trainer_class.extendable_budget(cfg)
     run_dir.claim(cfg, ignored=(trainer_class.budget_key,) if extendable else ())
     status = run_dir.read_status()
@@ -150,7 +159,7 @@ def main(cfg: DictConfig) -> float:
     """Runs one job; returns its deploy-regime success rate (what a sweeper would optimise)."""
     try:
         results = run(cfg)
-    except (ConfigValueError, ConfigMismatchError) as error:
+    except (ConfigValueError, ConfigMismatchError, RunInUseError) as error:
         raise SystemExit(f"error: {error}") from None
     except RunInterrupted as stop:
         command = " ".join(["python -m torchrl_causal.train", *HydraConfig.get().overrides.task])

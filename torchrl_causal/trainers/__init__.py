@@ -21,6 +21,7 @@ from torchrl_causal.trainers.run_directory import (
     CheckpointError,
     ConfigMismatchError,
     RunDirectory,
+    RunInUseError,
     load_checkpoint,
     run_label,
 )
@@ -36,6 +37,7 @@ __all__ = [
     "OffPolicyILTrainer",
     "ResumableCollector",
     "RunDirectory",
+    "RunInUseError",
     "RunInterrupted",
     "Score",
     "Trainer",

@@ -8,6 +8,7 @@ A run directory (``cfg.run_dir``) holds::
     train.log                the run's log lines (progress, evaluations, resume, errors)
     checkpoints/last.pt      networks, optimisers, schedulers, RNG states and counters (resume)
     checkpoints/best.pt      the policy with the best train-regime evaluation return
+    .lock                    held (``flock``) by the process running the run; names its pid
     replay/                  the policy replay buffer, memory-mapped (off-policy runs)
     logs/scalars/...csv      TorchRL CSVLogger scalars (``eval/train_return`` = training curve)
     eval/train.json          final evaluation of the best policy in each regime
@@ -20,16 +21,22 @@ checkpoints are read with ``torch.load(..., weights_only=True)``.
 A run directory belongs to one config. :meth:`RunDirectory.claim` compares the config
 that determines the result (everything but :data:`RUNTIME_KEYS` and an extendable
 budget) with the one stored in ``config.yaml`` and refuses a different one, naming the
-changed keys, before anything is written.
+changed keys, before anything is written. One process at a time runs it:
+:meth:`RunDirectory.lock` refuses a second one (two writers would interleave checkpoints
+and replay data), and the operating system releases the lock when its holder exits, so a
+killed run leaves no stale lock behind.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import math
 import os
 import shutil
-from collections.abc import Iterable, Mapping
+import socket
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +55,7 @@ __all__ = [
     "CheckpointError",
     "ConfigMismatchError",
     "RunDirectory",
+    "RunInUseError",
     "atomic_save",
     "atomic_write_text",
     "changed_keys",
@@ -63,6 +71,7 @@ EVAL_DIR = "eval"
 LOG_DIR = "logs"
 CHECKPOINT_DIR = "checkpoints"
 REPLAY_DIR = "replay"
+LOCK_FILE = ".lock"
 TRAIN_CURVE = "eval/train_return"  # scalar logged at every periodic train-regime evaluation
 
 #: Config keys that change how a run executes or where it writes, never its numbers: they
@@ -79,6 +88,10 @@ class CheckpointError(RuntimeError):
 
 class ConfigMismatchError(ValueError):
     """A run directory holds a run of a different config."""
+
+
+class RunInUseError(RuntimeError):
+    """Another process is running this run directory."""
 
 
 def run_label(algorithm: str, causal: bool, window_matched: bool = False) -> str:
@@ -240,9 +253,58 @@ class RunDirectory:
         atomic_write_text(self.config_file, OmegaConf.to_yaml(resolved))
 
     def discard(self) -> None:
-        """Removes everything a previous attempt wrote (``resume=false``)."""
-        if self.path.is_dir():
-            shutil.rmtree(self.path)
+        """Removes everything a previous attempt wrote (``resume=false``), the lock file aside."""
+        if not self.path.is_dir():
+            return
+        for entry in self.path.iterdir():
+            if entry.name == LOCK_FILE:
+                continue
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry)
+            else:
+                entry.unlink()
+
+    @contextmanager
+    def lock(self) -> Iterator[None]:
+        """Holds the run for this process: a second process that asks for it is refused.
+
+        An exclusive ``flock`` on ``<run_dir>/.lock`` (which records the holder's pid and
+        host); the kernel drops it when the holder exits, however it exits. On a network
+        file system this is only as reliable as the file system's ``flock``.
+
+        Raises:
+            RunInUseError: another process holds the lock (named in the message).
+
+        Examples:
+            >>> import tempfile
+            >>> run = RunDirectory(tempfile.mkdtemp())
+            >>> with run.lock():
+            ...     try:
+            ...         with run.lock():
+            ...             pass
+            ...     except RunInUseError as error:
+            ...         print("refused")
+            refused
+        """
+        self.path.mkdir(parents=True, exist_ok=True)
+        handle = open(self.path / LOCK_FILE, "a+")
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.seek(0)
+            holder = handle.read().strip() or "a process that did not record itself"
+            handle.close()
+            raise RunInUseError(
+                f"{self.path} is being run by {holder}. Wait for it to finish, or stop it (it checkpoints on "
+                "SIGTERM), then rerun this command to resume.") from None
+        try:
+            handle.truncate(0)
+            handle.write(f"pid {os.getpid()} on {socket.gethostname()}\n")
+            handle.flush()
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+            handle.close()
 
     # ------------------------------------------------------------------ status
 
