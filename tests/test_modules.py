@@ -57,6 +57,34 @@ def test_residual_mlp_is_projection_blocks_head_on_concatenated_inputs():
     torch.testing.assert_close(net(obs, act), expected)
 
 
+@settings(max_examples=25, deadline=None)
+@given(samples=st.integers(2, 5), batch=st.integers(1, 6), obs_dim=st.integers(1, 9), act_dim=st.integers(1, 3),
+       expanded=st.sampled_from(["observation", "action", "both"]), seed=st.integers(0, 2**16))
+def test_residual_mlp_on_an_expanded_input_equals_the_materialised_input(samples, batch, obs_dim, act_dim,
+                                                                        expanded, seed):
+    # IQ-Learn's K-sample pass expands each state beside K actions; the shared-input
+    # projection must give the values and gradients of the plain concatenation.
+    generator = torch.Generator().manual_seed(seed)
+    net = ResidualMLP(obs_dim + act_dim, 1, hidden=8, num_blocks=2)
+    obs = torch.randn(batch, obs_dim, generator=generator)
+    act = torch.randn(samples, batch, act_dim, generator=generator)
+    obs = obs.expand(samples, batch, obs_dim)
+    if expanded != "observation":
+        act = act[:1].expand(samples, batch, act_dim)
+    if expanded == "action":
+        obs = obs.contiguous()
+    expected_net = ResidualMLP(obs_dim + act_dim, 1, hidden=8, num_blocks=2)
+    expected_net.load_state_dict(net.state_dict())
+    out = net(obs, act)
+    expected = expected_net.head(expected_net.blocks(expected_net.projection(torch.cat([obs, act], -1))))
+    assert out.shape == (samples, batch, 1)
+    torch.testing.assert_close(out, expected)
+    out.square().sum().backward()
+    expected.square().sum().backward()
+    for (name, param), reference in zip(net.named_parameters(), expected_net.parameters()):
+        torch.testing.assert_close(param.grad, reference.grad, msg=name)
+
+
 def test_residual_mlp_names_a_wrong_input_size():
     with pytest.raises(ValueError, match="expects 5 input features, got 4"):
         ResidualMLP(5, 1, hidden=8)(torch.zeros(2, 4))

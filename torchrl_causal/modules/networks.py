@@ -31,6 +31,23 @@ def _concat(inputs: tuple[torch.Tensor, ...]) -> torch.Tensor:
     return inputs[0] if len(inputs) == 1 else torch.cat(inputs, dim=-1)
 
 
+def _unbroadcast(tensor: torch.Tensor) -> torch.Tensor:
+    """``tensor`` with every leading dim that ``expand`` repeated (stride 0) cut to size 1."""
+    for dim in range(tensor.ndim - 1):
+        if tensor.stride(dim) == 0 and tensor.shape[dim] > 1:
+            tensor = tensor.narrow(dim, 0, 1)
+    return tensor
+
+
+def _project_parts(projection: nn.Linear, inputs: tuple[torch.Tensor, ...]) -> torch.Tensor:
+    """``projection(cat(inputs))`` as a sum of one linear map per input, each on the input
+    with its expanded dims cut to size 1: an input shared by K rows is projected once."""
+    weights = projection.weight.split([t.shape[-1] for t in inputs], dim=-1)
+    parts = [nn.functional.linear(_unbroadcast(t), w) for t, w in zip(inputs, weights)]
+    out = sum(parts[1:], parts[0]) + projection.bias
+    return out.expand(*inputs[0].shape[:-1], out.shape[-1])
+
+
 class ResidualBlock(nn.Module):
     """Pre-norm residual block: ``x + Linear(Dropout(SiLU(LN(Linear(SiLU(LN(x)))))))``.
 
@@ -110,13 +127,19 @@ class ResidualMLP(nn.Module):
         self.head = nn.Linear(hidden, out_features)
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
-        x = _concat(inputs)
-        if x.shape[-1] != self.in_features:
+        features = sum(t.shape[-1] for t in inputs)
+        if features != self.in_features:
             raise ValueError(
-                f"ResidualMLP expects {self.in_features} input features, got {x.shape[-1]} "
+                f"ResidualMLP expects {self.in_features} input features, got {features} "
                 f"(input shapes {[tuple(t.shape) for t in inputs]})."
             )
-        return self.head(self.blocks(self.projection(x)))
+        if len(inputs) > 1 and any(_unbroadcast(t) is not t for t in inputs):
+            # IQ-Learn's K policy samples per state arrive as an expanded state beside K
+            # actions; projecting the state once makes that pass ~2x faster (355-dim window).
+            x = _project_parts(self.projection, inputs)
+        else:
+            x = self.projection(_concat(inputs))
+        return self.head(self.blocks(x))
 
 
 class SkipMLP(nn.Module):
