@@ -26,7 +26,7 @@ from torchrl_causal.evaluation import (
     write_report,
 )
 from torchrl_causal.evaluation.runs import eval_path
-from torchrl_causal.evaluation.tables import seed_spread, seeds_markdown
+from torchrl_causal.evaluation.tables import seed_effect_checks, seed_spread, seeds_markdown
 from torchrl_causal.report import main as report_main
 
 # Appendix F, AntMaze-Medium column: raw E[Y] and success rate (%), deployment regime.
@@ -172,8 +172,13 @@ def test_across_seeds_table_has_each_seed_and_the_seed_standard_error(tmp_path: 
     assert seed_spread([0.2, 0.4]) == pytest.approx((0.3, 0.1))
     with pytest.raises(ValueError, match="at least one"):
         seed_spread([])
+    make_fake_run(tmp_path, "expert", deploy=(-90.0, 100.0), train=(-90.0, 100.0), episodes=100)
+    (check,) = seed_effect_checks(load_runs(tmp_path), causal_fraction=0.85)
+    assert (check.measured, check.passed) == ("seed 0: 80%, seed 1: 90%, seed 2: 100%", False)
+    assert seed_effect_checks(load_runs(tmp_path), causal_fraction=0.8)[0].passed
     report = write_report(tmp_path, tmp_path / "out")
-    assert "### Across seeds" in report.markdown.read_text()
+    text = report.markdown.read_text()
+    assert "### Across seeds" in text and "of the expert's in every seed" in text
 
 
 def test_notes_survive_regeneration_and_cli(paper_runs: Path, tmp_path: Path, capsys) -> None:

@@ -18,6 +18,7 @@ from torchrl_causal.evaluation.tables import (
     effect_markdown,
     lengths_markdown,
     raw_markdown,
+    seed_effect_checks,
     seeds_markdown,
     table1_markdown,
     write_csv,
@@ -115,7 +116,11 @@ def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, na
         lines += ["### Raw E[Y] and success rate", "", raw_markdown(table), "",
                   "### Mean length of successful episodes", "", lengths_markdown(table), ""]
         if len(seeds) > 1:
-            lines += ["### Across seeds", "", seeds_markdown(r for r in runs if r.setting == setting), ""]
+            setting_runs = [r for r in runs if r.setting == setting]
+            lines += ["### Across seeds", "", seeds_markdown(setting_runs), ""]
+            seed_checks = seed_effect_checks(setting_runs)
+            if seed_checks:
+                lines += [effect_markdown(seed_checks), ""]
         checks = effect_checks(table)
         if checks:
             lines += ["### The paper's effect, checked", "", effect_markdown(checks), ""]

@@ -37,6 +37,7 @@ __all__ = [
     "seeds_markdown",
     "EffectCheck",
     "effect_checks",
+    "seed_effect_checks",
     "effect_markdown",
 ]
 
@@ -303,6 +304,30 @@ def effect_checks(
                 f"{100 * plain:.1f}% vs {100 * causal:.1f}% ({gap:+.1f} points)",
                 abs(gap) <= train_gap_points,
             ))
+    return checks
+
+
+def seed_effect_checks(runs: Iterable[RunRecord], *, causal_fraction: float = 0.8) -> list[EffectCheck]:
+    """:func:`effect_checks`' causal claim seed by seed: each causal off-policy method keeps
+    ``causal_fraction`` of the expert's deploy success in every training seed (the expert
+    pooled over its runs, since it does not train). Skipped without an expert run."""
+    runs = list(runs)
+    expert = [run.evaluations["deploy"] for run in runs if run.label == "expert" and "deploy" in run.evaluations]
+    if not expert:
+        return []
+    expert_rate = EvaluationResult.pool(expert).success_rate
+    checks = []
+    for label in ("c_sqil", "c_iq_learn"):
+        by_seed = {run.seed: run.evaluations["deploy"].success_rate for run in runs
+                   if run.label == label and "deploy" in run.evaluations}
+        if not by_seed or not expert_rate:
+            continue
+        fractions = {seed: rate / expert_rate for seed, rate in sorted(by_seed.items())}
+        checks.append(EffectCheck(
+            f"{display_name(label)} deploy success >= {causal_fraction:.0%} of the expert's in every seed",
+            ", ".join(f"seed {seed}: {fraction:.0%}" for seed, fraction in fractions.items()),
+            all(fraction >= causal_fraction for fraction in fractions.values()),
+        ))
     return checks
 
 
