@@ -8,8 +8,9 @@ directory exists. ``scale=paper`` selects Appendix E's networks and budgets,
 ``python -m torchrl_causal.train -m experiment=paper_table``.
 
 A run directory belongs to one config (a changed config is refused, naming the changed
-keys) and to one process at a time (a second one is refused, naming the first); rerunning the same command resumes an unfinished run from its last checkpoint
-and returns a finished run's stored evaluations. Ctrl-C (SIGINT) or SIGTERM finishes
+keys) and to one process at a time (a second one is refused, naming the first);
+rerunning the same command resumes an unfinished run from its last checkpoint and
+returns a finished run's stored evaluations. Ctrl-C (SIGINT) or SIGTERM finishes
 the training step in flight, checkpoints, marks the run interrupted and prints the
 command that resumes it.
 """
