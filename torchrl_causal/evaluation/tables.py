@@ -222,6 +222,15 @@ def seed_spread(values: Sequence[float]) -> tuple[float, float]:
     return mean, math.sqrt(variance / n)
 
 
+def _success_by_seed(runs: Iterable[RunRecord]) -> dict[str, dict[str, dict[int, float]]]:
+    """label -> regime -> {seed: success rate}, seeds in ascending order."""
+    rates: dict[str, dict[str, dict[int, float]]] = defaultdict(lambda: defaultdict(dict))
+    for run in sorted(runs, key=lambda r: r.seed):
+        for regime, result in run.evaluations.items():
+            rates[run.label][regime][run.seed] = result.success_rate
+    return rates
+
+
 def seeds_markdown(runs: Iterable[RunRecord]) -> str:
     """Success rate of every seed and its mean ± standard error over seeds, both regimes.
 
@@ -229,10 +238,7 @@ def seeds_markdown(runs: Iterable[RunRecord]) -> str:
     error, which is what the paper's Table 1 reports: 87.6 ± 1.0 is the binomial error of
     1000 episodes); this one shows how much the training seed matters.
     """
-    rates: dict[str, dict[str, dict[int, float]]] = defaultdict(lambda: defaultdict(dict))
-    for run in runs:
-        for regime, result in run.evaluations.items():
-            rates[run.label][regime][run.seed] = 100 * result.success_rate
+    rates = _success_by_seed(runs)
     header = ["Algorithm"]
     for regime in REGIMES:
         header += [f"SR % per seed ({regime})", f"mean ± SE over seeds ({regime})"]
@@ -240,12 +246,12 @@ def seeds_markdown(runs: Iterable[RunRecord]) -> str:
     for label in ordered_labels(rates):
         row = [display_name(label)]
         for regime in REGIMES:
-            by_seed = rates[label].get(regime, {})
-            if not by_seed:
+            percents = [100 * rate for rate in rates[label].get(regime, {}).values()]
+            if not percents:
                 row += ["—", "—"]
                 continue
-            row.append(", ".join(f"{by_seed[seed]:.1f}" for seed in sorted(by_seed)))
-            row.append(_pm(*seed_spread([by_seed[seed] for seed in sorted(by_seed)])))
+            row.append(", ".join(f"{value:.1f}" for value in percents))
+            row.append(_pm(*seed_spread(percents)))
         rows.append(row)
     return _markdown(header, rows)
 
@@ -316,13 +322,13 @@ def seed_effect_checks(runs: Iterable[RunRecord], *, causal_fraction: float = 0.
     if not expert:
         return []
     expert_rate = EvaluationResult.pool(expert).success_rate
+    rates = _success_by_seed(runs)
     checks = []
     for label in ("c_sqil", "c_iq_learn"):
-        by_seed = {run.seed: run.evaluations["deploy"].success_rate for run in runs
-                   if run.label == label and "deploy" in run.evaluations}
+        by_seed = rates.get(label, {}).get("deploy", {})
         if not by_seed or not expert_rate:
             continue
-        fractions = {seed: rate / expert_rate for seed, rate in sorted(by_seed.items())}
+        fractions = {seed: rate / expert_rate for seed, rate in by_seed.items()}
         checks.append(EffectCheck(
             f"{display_name(label)} deploy success >= {causal_fraction:.0%} of the expert's in every seed",
             ", ".join(f"seed {seed}: {fraction:.0%}" for seed, fraction in fractions.items()),

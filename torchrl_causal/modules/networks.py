@@ -39,13 +39,14 @@ def _unbroadcast(tensor: torch.Tensor) -> torch.Tensor:
     return tensor
 
 
-def _project_parts(projection: nn.Linear, inputs: tuple[torch.Tensor, ...]) -> torch.Tensor:
+def _project_parts(projection: nn.Linear, collapsed: list[torch.Tensor], batch_shape: torch.Size) -> torch.Tensor:
     """``projection(cat(inputs))`` as a sum of one linear map per input, each on the input
-    with its expanded dims cut to size 1: an input shared by K rows is projected once."""
-    weights = projection.weight.split([t.shape[-1] for t in inputs], dim=-1)
-    parts = [nn.functional.linear(_unbroadcast(t), w) for t, w in zip(inputs, weights)]
+    with its expanded dims cut to size 1 (``collapsed``): an input shared by K rows is
+    projected once, and the sum is broadcast back to ``batch_shape``."""
+    weights = projection.weight.split([t.shape[-1] for t in collapsed], dim=-1)
+    parts = [nn.functional.linear(t, w) for t, w in zip(collapsed, weights)]
     out = sum(parts[1:], parts[0]) + projection.bias
-    return out.expand(*inputs[0].shape[:-1], out.shape[-1])
+    return out.expand(*batch_shape, out.shape[-1])
 
 
 class ResidualBlock(nn.Module):
@@ -133,10 +134,11 @@ class ResidualMLP(nn.Module):
                 f"ResidualMLP expects {self.in_features} input features, got {features} "
                 f"(input shapes {[tuple(t.shape) for t in inputs]})."
             )
-        if len(inputs) > 1 and any(_unbroadcast(t) is not t for t in inputs):
+        collapsed = [_unbroadcast(t) for t in inputs] if len(inputs) > 1 else list(inputs)
+        if any(c is not t for c, t in zip(collapsed, inputs)):
             # IQ-Learn's K policy samples per state arrive as an expanded state beside K
             # actions; projecting the state once makes that pass ~2x faster (355-dim window).
-            x = _project_parts(self.projection, inputs)
+            x = _project_parts(self.projection, collapsed, inputs[0].shape[:-1])
         else:
             x = self.projection(_concat(inputs))
         return self.head(self.blocks(x))
