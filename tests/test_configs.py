@@ -32,7 +32,8 @@ PAPER_SHARED = {
              "critic_optimizer.lr": 3e-4, "batch_size": 1024, "loss.gamma": 0.99, "max_grad_norm": 0.5,
              "loss.clip_epsilon": 0.2, "loss.gae_lambda": 0.95, "loss.entropy_coeff": 1e-2, "loss.critic_coeff": 0.5,
              "loss.normalize_advantage": True, "discriminator_optimizer.lr": 3e-4, "discriminator.dropout": 0.2,
-             "discriminator_updates": 2, "discriminator_batch_size": 1024, "loss.gp_lambda": 5.0,
+             "discriminator_epochs": 2,  # "updated 2 times per round": see gail.yaml
+             "discriminator_batch_size": 1024, "loss.gp_lambda": 5.0,
              "discriminator_scheduler.step_size": 100, "discriminator_scheduler.gamma": 0.5},
     "sqil": {"actor.hidden": 256, "actor.num_blocks": 3, "actor.dropout": 0.05, "critic.hidden": 256,
              "critic.num_blocks": 3, "actor_optimizer.lr": 3e-4, "critic_optimizer.lr": 3e-4, "batch_size": 256,

@@ -12,7 +12,7 @@ import torch
 from test_trainers import build_trainer, tiny_config
 
 from torchrl_causal.train import run
-from torchrl_causal.trainers import ConfigValueError, off_policy
+from torchrl_causal.trainers import ConfigValueError, gail, off_policy
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
@@ -111,3 +111,27 @@ def test_gail_ppo_ratio_is_one_before_the_first_update(tmp_path: Path, absorbing
     assert ratios["clip"] == 0.0
     assert ratios["max"] == pytest.approx(1.0, abs=1e-5) and ratios["mean"] == pytest.approx(1.0, abs=1e-5)
     assert ratios["absorbing_key"] == absorbing
+
+
+def test_gail_discriminator_passes_over_every_policy_row_each_epoch(tmp_path: Path, monkeypatch) -> None:
+    # 2 envs x the tiny horizon of policy rows, minibatches of 32 with a short last one.
+    trainer = build_trainer(tiny_config(tmp_path, "rovermaze_u", "gail", False, "algo.rounds=1",
+                                        "algo.discriminator_epochs=3", "algo.discriminator_batch_size=32"))
+    policy_batches = []
+    pair = gail.gail_discriminator_batch
+
+    def spy(loss, expert, policy):
+        policy_batches.append(policy["observation"].clone())
+        return pair(loss, expert, policy)
+
+    monkeypatch.setattr(gail, "gail_discriminator_batch", spy)
+    trainer.fit()
+    rows = trainer.cfg.algo.episodes_per_round * trainer.cfg.env.horizon
+    steps_per_epoch = math.ceil(rows / 32)
+    assert len(policy_batches) == 3 * steps_per_epoch and rows % 32 != 0
+    passes = [torch.cat(policy_batches[i:i + steps_per_epoch]) for i in range(0, len(policy_batches), steps_per_epoch)]
+    first = passes[0].unique(dim=0, return_counts=True)
+    for seen in passes:  # each pass holds the same rows, each as often: a permutation of the round's rows
+        assert seen.shape[0] == rows
+        assert all(torch.equal(a, b) for a, b in zip(seen.unique(dim=0, return_counts=True), first))
+    assert not torch.equal(passes[0], passes[1])  # reshuffled between passes

@@ -3,9 +3,11 @@ updates, then PPO epochs on the discriminator's reward (Appendix E's protocol).
 
 Each round a TorchRL collector steps ``episodes_per_round``
 envs for ``horizon`` steps each (at least that many episodes; finished ones restart).
-The discriminator (a gradient penalty on its logit) takes ``discriminator_updates``
-steps on minibatches of expert and fresh policy transitions, its learning rate halving
-every ``discriminator_scheduler.step_size`` rounds (StepLR). The discriminator's reward
+The discriminator (a gradient penalty on its logit) makes ``discriminator_epochs``
+passes over the round's policy transitions in shuffled minibatches of
+``discriminator_batch_size``, each paired with as many expert transitions drawn at
+random, its learning rate halving every ``discriminator_scheduler.step_size`` rounds
+(StepLR). The discriminator's reward
 (``algo.loss.reward``: its logit by default) feeds GAE, and ``ppo_epochs`` passes of
 clipped PPO over shuffled minibatches update the actor and value network, with
 gradient-norm clipping. With ``algo.loss.absorbing`` expert and policy transitions get
@@ -72,7 +74,7 @@ class GAILTrainer(Trainer):
             list(ppo.critic_network_params.flatten_keys().values()))
         self.discriminator_optimizer = instantiate(algo.discriminator_optimizer)(self.losses.discriminator.parameters())
         self.discriminator_schedule = instantiate(algo.discriminator_scheduler)(self.discriminator_optimizer)
-        self.expert = self._discriminator_rows(
+        self.expert = self.discriminator_rows(
             expert_transitions(self.window, load_or_collect_demonstrations(self.cfg))).to(self.device)
         self.generator = torch.Generator().manual_seed(self.cfg.seed)
         self.collector = ResumableCollector(self.env, self.policy, frames_per_batch=algo.episodes_per_round * self.cfg.env.horizon,
@@ -80,7 +82,7 @@ class GAILTrainer(Trainer):
                                             storing_device=self.device, auto_register_policy_transforms=False)
         self.rollouts = iter(self.collector)
 
-    def _discriminator_rows(self, transitions: TensorDictBase) -> TensorDictBase:
+    def discriminator_rows(self, transitions: TensorDictBase) -> TensorDictBase:
         """What the discriminator sees of flat transitions (with their absorbing states, when enabled)."""
         if self.cfg.algo.loss.absorbing:
             return add_absorbing_transitions(transitions).select("observation", "action", ABSORBING_KEY)
@@ -93,18 +95,22 @@ class GAILTrainer(Trainer):
     def _sample(self, data: TensorDictBase, size: int) -> TensorDictBase:
         return data[torch.randint(data.numel(), (min(size, data.numel()),), generator=self.generator)]
 
-    def _update_discriminator(self, rollout: TensorDictBase) -> torch.Tensor:
+    def _update_discriminator(self, policy_rows: TensorDictBase) -> torch.Tensor:
+        """``discriminator_epochs`` passes over ``policy_rows``; returns the mean loss."""
         algo = self.cfg.algo
-        size = min(algo.discriminator_batch_size, rollout.numel(), self.expert.numel())
+        size = min(algo.discriminator_batch_size, self.expert.numel())
         losses = []
-        for _ in range(algo.discriminator_updates):
-            batch = gail_discriminator_batch(self.losses.discriminator, self._sample(self.expert, size),
-                                             self._sample(rollout, size))
-            loss = self.losses.discriminator(batch)["loss"]
-            self.discriminator_optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            self.discriminator_optimizer.step()
-            losses.append(loss.detach())
+        for _ in range(algo.discriminator_epochs):
+            order = torch.randperm(policy_rows.numel(), generator=self.generator)
+            for start in range(0, policy_rows.numel(), size):
+                policy = policy_rows[order[start:start + size]]
+                batch = gail_discriminator_batch(self.losses.discriminator, self._sample(self.expert, policy.numel()),
+                                                 policy)
+                loss = self.losses.discriminator(batch)["loss"]
+                self.discriminator_optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                self.discriminator_optimizer.step()
+                losses.append(loss.detach())
         return torch.stack(losses).mean()
 
     def _update_policy(self, rollout: TensorDictBase) -> dict[str, torch.Tensor]:
@@ -131,7 +137,7 @@ class GAILTrainer(Trainer):
 
     def train_step(self) -> Mapping[str, torch.Tensor]:
         rollout = next(self.rollouts)  # [episodes_per_round, horizon], time last
-        policy_rows = self._discriminator_rows(rollout.reshape(-1).select(*TRANSITION_KEYS))
+        policy_rows = self.discriminator_rows(rollout.reshape(-1).select(*TRANSITION_KEYS))
         scalars = {"train/env_reward_per_step": rollout["next", "reward"].mean(),
                    "train/loss_discriminator": self._update_discriminator(policy_rows)}
         with torch.no_grad():

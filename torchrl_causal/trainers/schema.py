@@ -317,7 +317,7 @@ class GAILConfig(TrainedAlgoConfig):
     batch_size: int = at_least()
     max_grad_norm: float = positive()
     ppo_epochs: int = at_least()
-    discriminator_updates: int = at_least()
+    discriminator_epochs: int = at_least()
     discriminator_batch_size: int = at_least()
     episodes_per_round: int = at_least()
     rounds: int = at_least()
