@@ -25,7 +25,7 @@ on the CPU and the collector moves observations to the policy and actions back.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 import torch
@@ -95,22 +95,25 @@ class GAILTrainer(Trainer):
     def _sample(self, data: TensorDictBase, size: int) -> TensorDictBase:
         return data[torch.randint(data.numel(), (min(size, data.numel()),), generator=self.generator)]
 
+    def _minibatches(self, rows: TensorDictBase, batch_size: int, epochs: int) -> Iterator[TensorDictBase]:
+        """``epochs`` passes over ``rows`` in minibatches of ``batch_size``, reshuffled every pass."""
+        for _ in range(epochs):
+            order = torch.randperm(rows.numel(), generator=self.generator)
+            for start in range(0, rows.numel(), batch_size):
+                yield rows[order[start:start + batch_size]]
+
     def _update_discriminator(self, policy_rows: TensorDictBase) -> torch.Tensor:
         """``discriminator_epochs`` passes over ``policy_rows``; returns the mean loss."""
         algo = self.cfg.algo
         size = min(algo.discriminator_batch_size, self.expert.numel())
         losses = []
-        for _ in range(algo.discriminator_epochs):
-            order = torch.randperm(policy_rows.numel(), generator=self.generator)
-            for start in range(0, policy_rows.numel(), size):
-                policy = policy_rows[order[start:start + size]]
-                batch = gail_discriminator_batch(self.losses.discriminator, self._sample(self.expert, policy.numel()),
-                                                 policy)
-                loss = self.losses.discriminator(batch)["loss"]
-                self.discriminator_optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                self.discriminator_optimizer.step()
-                losses.append(loss.detach())
+        for policy in self._minibatches(policy_rows, size, algo.discriminator_epochs):
+            batch = gail_discriminator_batch(self.losses.discriminator, self._sample(self.expert, policy.numel()), policy)
+            loss = self.losses.discriminator(batch)["loss"]
+            self.discriminator_optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            self.discriminator_optimizer.step()
+            losses.append(loss.detach())
         return torch.stack(losses).mean()
 
     def _update_policy(self, rollout: TensorDictBase) -> dict[str, torch.Tensor]:
@@ -119,20 +122,18 @@ class GAILTrainer(Trainer):
         params = [p for optimizer in self.policy_optimizers for group in optimizer.param_groups for p in group["params"]]
         sums: dict[str, torch.Tensor] = {}
         count = 0
-        for _ in range(algo.ppo_epochs):
-            order = torch.randperm(rollout.numel(), generator=self.generator)
-            for start in range(0, rollout.numel(), algo.batch_size):
-                out = ppo(rollout[order[start:start + algo.batch_size]])
-                loss = out["loss_objective"] + out["loss_critic"] + out["loss_entropy"]
-                for optimizer in self.policy_optimizers:
-                    optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(params, algo.max_grad_norm)
-                for optimizer in self.policy_optimizers:
-                    optimizer.step()
-                for key in ("loss_objective", "loss_critic", "loss_entropy", "clip_fraction"):
-                    sums[key] = sums.get(key, 0.0) + out[key].detach()
-                count += 1
+        for minibatch in self._minibatches(rollout, algo.batch_size, algo.ppo_epochs):
+            out = ppo(minibatch)
+            loss = out["loss_objective"] + out["loss_critic"] + out["loss_entropy"]
+            for optimizer in self.policy_optimizers:
+                optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(params, algo.max_grad_norm)
+            for optimizer in self.policy_optimizers:
+                optimizer.step()
+            for key in ("loss_objective", "loss_critic", "loss_entropy", "clip_fraction"):
+                sums[key] = sums.get(key, 0.0) + out[key].detach()
+            count += 1
         return {f"train/{k}": v / count for k, v in sums.items()}
 
     def train_step(self) -> Mapping[str, torch.Tensor]:
