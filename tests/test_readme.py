@@ -1,0 +1,139 @@
+"""The README's results tables against the results files they quote.
+
+Every results table in the README is preceded by ``<!-- figures: results/<file> -->``:
+
+* a ``.csv`` (the report's layout): the table has a ``regime`` column and one column per
+  algorithm (its display name); each ``train`` / ``deploy`` cell must equal the file's
+  success rate in percent, to one decimal. Other rows (the paper's numbers) are not checked.
+* a ``.md`` (the strength ablation's file): each README row must equal, cell for cell
+  (the leading number, without its ``± SE``), the row of the same algorithm in the file's
+  table with the same column headers.
+
+A figure that changes in ``results/`` without the README following fails here.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from pathlib import Path
+
+import pytest
+
+from torchrl_causal.evaluation.tables import REGIMES, display_name
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+MARKER = re.compile(r"<!--\s*figures:\s*(\S+)\s*-->")
+
+Table = list[list[str]]
+
+
+def _cells(line: str) -> list[str]:
+    return [cell.strip() for cell in line.strip().strip("|").split("|")]
+
+
+def _is_separator(line: str) -> bool:
+    return set(line.replace("|", "").strip()) <= {"-", ":", " "}
+
+
+def markdown_tables(lines: list[str]) -> list[tuple[int, Table]]:
+    """Each markdown table of ``lines`` as (index of its header line, header and body rows)."""
+    tables, start = [], None
+    for index, line in enumerate(lines + [""]):
+        if line.lstrip().startswith("|"):
+            start = index if start is None else start
+            continue
+        if start is not None:
+            rows = [_cells(row) for row in lines[start:index] if not _is_separator(row)]
+            tables.append((start, rows))
+            start = None
+    return tables
+
+
+def marked_tables(text: str) -> list[tuple[str, Table]]:
+    """(quoted file, table) for every table that directly follows a figures marker."""
+    lines = text.splitlines()
+    tables = dict(markdown_tables(lines))
+    marked = []
+    for index, line in enumerate(lines):
+        match = MARKER.search(line)
+        if match:
+            following = next((i for i in range(index + 1, len(lines)) if lines[i].strip()), None)
+            assert following in tables, f"README line {index + 1}: the figures marker is not followed by a table"
+            marked.append((match.group(1), tables[following]))
+    return marked
+
+
+def _leading_number(cell: str) -> str:
+    match = re.match(r"\**\s*(-?\d+(?:\.\d+)?)", cell)
+    assert match, f"not a figure: {cell!r}"
+    return match.group(1)
+
+
+def check_against_csv(table: Table, path: Path) -> int:
+    """Asserts the table's regime rows equal the CSV's success rates; returns the cells checked."""
+    with path.open() as handle:
+        rates = {(row["algorithm"], row["regime"]): float(row["success_rate"]) for row in csv.DictReader(handle)}
+    labels = {display_name(algorithm): algorithm for algorithm, _ in rates}
+    header, checked = table[0], 0
+    assert header[0] == "regime", f"{path.name}: a CSV-backed table starts with a 'regime' column, not {header[0]!r}"
+    unknown = [name for name in header[1:] if name not in labels]
+    assert not unknown, f"README columns {unknown} have no rows in {path.name}"
+    for row in table[1:]:
+        if row[0] not in REGIMES:
+            continue
+        for name, cell in zip(header[1:], row[1:]):
+            expected = f"{100 * rates[(labels[name], row[0])]:.1f}"
+            assert _leading_number(cell) == expected, f"README {name} / {row[0]}: {cell}, {path.name}: {expected}"
+            checked += 1
+    return checked
+
+
+def check_against_markdown(table: Table, path: Path) -> int:
+    """Asserts each row equals the same algorithm's row in the file's table with this header."""
+    candidates = [rows for _, rows in markdown_tables(path.read_text().splitlines()) if rows[0][1:] == table[0][1:]]
+    assert candidates, f"{path.name} has no table with the columns {table[0][1:]}"
+    source = {row[0]: row[1:] for row in candidates[0][1:]}
+    checked = 0
+    for row in table[1:]:
+        assert row[0] in source, f"README row {row[0]!r} is not in {path.name}"
+        assert [_leading_number(c) for c in row[1:]] == [_leading_number(c) for c in source[row[0]]], (
+            f"README row {row}, {path.name}: {source[row[0]]}")
+        checked += len(row) - 1
+    return checked
+
+
+def test_every_results_table_is_marked() -> None:
+    results = README.read_text().split("\n## Results", 1)[1].split("\n## ", 1)[0]
+    lines = results.splitlines()
+    marked_headers = {index for index, _ in markdown_tables(lines)
+                      if any(MARKER.search(line) for line in lines[max(0, index - 2):index])}
+    figure_tables = [index for index, rows in markdown_tables(lines) if rows[0][0] in ("regime", "strength")]
+    assert figure_tables, "the README's results section has no tables"
+    unmarked = [rows for index, rows in markdown_tables(lines) if index in figure_tables and index not in marked_headers]
+    assert not unmarked, f"results tables without a figures marker: {[rows[0] for rows in unmarked]}"
+
+
+@pytest.mark.parametrize("quoted, table", marked_tables(README.read_text()), ids=lambda x: str(x)[:40])
+def test_readme_table_matches_its_results_file(quoted: str, table: Table) -> None:
+    path = ROOT / quoted
+    assert path.is_file(), f"the README quotes {quoted}, which does not exist"
+    check = check_against_csv if path.suffix == ".csv" else check_against_markdown
+    assert check(table, path) > 0
+
+
+def test_checks_catch_a_changed_figure(tmp_path: Path) -> None:
+    results = tmp_path / "t.csv"
+    results.write_text("algorithm,regime,success_rate\nc_sqil,train,0.4\nc_sqil,deploy,0.428\n")
+    table = [["regime", "C-SQIL"], ["train", "40.0"], ["deploy", "42.8"], ["paper, deploy", "90.7"]]
+    assert check_against_csv(table, results) == 2
+    with pytest.raises(AssertionError, match="C-SQIL / deploy"):
+        check_against_csv([table[0], ["deploy", "42.9"]], results)
+    with pytest.raises(AssertionError, match="no rows"):
+        check_against_csv([["regime", "SQIL"], ["train", "1.0"]], results)
+    strength = tmp_path / "s.md"
+    strength.write_text("| Algorithm | 0.15 | 0.5 |\n|---|---|---|\n| BC | 80.9 ± 1.2 | 0.0 ± 0.0 |\n")
+    assert check_against_markdown([["strength", "0.15", "0.5"], ["BC", "80.9", "0.0"]], strength) == 2
+    with pytest.raises(AssertionError, match="README row"):
+        check_against_markdown([["strength", "0.15", "0.5"], ["BC", "80.0", "0.0"]], strength)
