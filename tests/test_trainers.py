@@ -188,6 +188,27 @@ def test_a_run_held_by_another_process_is_refused_and_a_killed_holder_leaves_no_
     assert json.loads((run_dir / "status.json").read_text())["status"] == "complete"
 
 
+def test_a_killed_run_reads_as_killed_not_running(tmp_path: Path) -> None:
+    run_dir = RunDirectory(tmp_path / "run")
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time\n"
+         "from torchrl_causal.trainers import RunDirectory\n"
+         "run = RunDirectory(sys.argv[1])\n"
+         "with run.lock():\n"
+         "    run.write_status('running', progress=7)\n"
+         "    print('held', flush=True)\n"
+         "    time.sleep(600)\n", str(run_dir.path)],
+        stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        assert run_dir.is_held() and run_dir.read_status() == {"status": "running", "progress": 7}
+    finally:
+        holder.kill()  # SIGKILL: the holder cannot record its stop
+        holder.wait()
+    assert json.loads(run_dir.status_file.read_text())["status"] == "running"
+    assert not run_dir.is_held() and run_dir.read_status() == {"status": "killed", "progress": 7}
+
+
 def test_raising_the_budget_continues_a_finished_run(tmp_path: Path) -> None:
     run(tiny_config(tmp_path, "route_choice", "gail", True))
     longer = tiny_config(tmp_path, "route_choice", "gail", True, "algo.rounds=4")

@@ -101,7 +101,11 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
     total = trainer_class.budget(cfg) if trainer_class else 0
     run_dir = RunDirectory(cfg.run_dir)
     created = _first_missing(run_dir.path)  # what a failure before any checkpoint removes
+    killed = run_dir.read_status().get("status") == "killed"
     with run_dir.lock():
+        if killed and cfg.resume:
+            log.warning("%s: its last attempt was killed before it could record its stop; resuming from its last "
+                        "checkpoint", run_dir.path)
         if not cfg.resume:
             run_dir.discard()
             created = created or run_dir.path

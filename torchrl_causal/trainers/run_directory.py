@@ -5,6 +5,7 @@ A run directory (``cfg.run_dir``) holds::
     config.yaml              the full resolved config of the run
     window.json              the adjustment window the policy was trained on
     status.json              {"status": "running" | "interrupted" | "failed" | "complete", counters}
+                             (read as "killed" when it says running and no process holds .lock)
     train.log                the run's log lines (progress, evaluations, resume, errors)
     checkpoints/last.pt      networks, optimisers, schedulers, RNG states and counters (resume)
     checkpoints/best.pt      the policy with the best train-regime evaluation return
@@ -308,9 +309,50 @@ class RunDirectory:
 
     # ------------------------------------------------------------------ status
 
+    def is_held(self) -> bool:
+        """Whether a process (this one included) holds :meth:`lock` now.
+
+        Examples:
+            >>> import tempfile
+            >>> run = RunDirectory(tempfile.mkdtemp())
+            >>> with run.lock():
+            ...     print(run.is_held())
+            True
+            >>> run.is_held()
+            False
+        """
+        if not (self.path / LOCK_FILE).is_file():
+            return False
+        with open(self.path / LOCK_FILE) as handle:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return True
+            fcntl.flock(handle, fcntl.LOCK_UN)
+            return False
+
     def read_status(self) -> dict[str, Any]:
-        """``status.json`` (``{}`` before the first write)."""
-        return json.loads(self.status_file.read_text()) if self.status_file.is_file() else {}
+        """``status.json`` (``{}`` before the first write), told apart from a dead writer.
+
+        A run whose process was killed outright (SIGKILL, a machine that stopped) never
+        records its stop, so its file still says ``"running"``; when no process holds the
+        lock, the status read here is ``"killed"`` instead, and a rerun resumes it from its
+        last checkpoint.
+
+        Examples:
+            >>> import tempfile
+            >>> run = RunDirectory(tempfile.mkdtemp())
+            >>> run.write_status("running", progress=40)
+            >>> run.read_status()
+            {'status': 'killed', 'progress': 40}
+            >>> with run.lock():
+            ...     print(run.read_status()["status"])
+            running
+        """
+        status = json.loads(self.status_file.read_text()) if self.status_file.is_file() else {}
+        if status.get("status") == "running" and not self.is_held():
+            status["status"] = "killed"
+        return status
 
     def write_status(self, status: str, **fields: Any) -> None:
         """Replaces ``status.json`` with ``status`` and ``fields`` (infinite floats become null)."""
