@@ -28,8 +28,9 @@ from torchrl_causal.evaluation.runs import read_scalar_csv
 from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
 from torchrl_causal.objectives import IQLearnLoss
 from torchrl_causal.train import run
-from torchrl_causal.trainers import Trainer
-from torchrl_causal.trainers.device import PolicyOnDevice, for_cpu_env, resolve_device
+from torchrl_causal.trainers import Trainer, compose_config
+from torchrl_causal.trainers.device import PolicyOnDevice, compile_unavailable, for_cpu_env, resolve_device
+from torchrl_causal.trainers.schema import ConfigValueError, validate_config
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
 DEVICES = ["cpu", *(["cuda"] if torch.cuda.is_available() else [])]
@@ -240,11 +241,18 @@ def test_losses_are_averaged_on_device_and_logged_every_n_updates(tmp_path: Path
 
 
 def _compile_unavailable() -> str | None:
-    if not torch._dynamo.is_dynamo_supported():
-        return f"torch.compile is not supported on Python {sys.version.split()[0]} with torch {torch.__version__}"
-    if not (os.environ.get("CXX") or shutil.which("g++") or shutil.which("c++") or shutil.which("clang++")):
-        return "torch.compile's CPU backend (inductor) needs a C++ compiler and none is on PATH"
-    return None
+    return compile_unavailable(torch.device("cpu"))
+
+
+def test_compile_without_a_cxx_compiler_is_refused_before_a_run_directory_exists(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.delenv("CXX", raising=False)
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    assert "needs a C++ compiler" in compile_unavailable(torch.device("cpu"))
+    cfg = compose_config([f"run_root={tmp_path}", "env=route_choice", "algo=sqil", "compile=true"])
+    with pytest.raises(ConfigValueError, match="compile=true cannot run on cpu here: .*C\\+\\+ compiler"):
+        run(cfg)
+    assert not any(tmp_path.iterdir())
+    validate_config(compose_config([f"run_root={tmp_path}", "env=route_choice", "algo=sqil", "compile=false"]))
 
 
 def _iq_learn_update(compile: bool) -> ActorCriticUpdate:

@@ -8,6 +8,9 @@ actions back (``env_device`` / ``policy_device`` / ``storing_device``);
 
 from __future__ import annotations
 
+import os
+import shutil
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -17,7 +20,7 @@ from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-__all__ = ["DeviceCheck", "PolicyOnDevice", "for_cpu_env", "resolve_device"]
+__all__ = ["DeviceCheck", "PolicyOnDevice", "compile_unavailable", "for_cpu_env", "resolve_device"]
 
 CPU = torch.device("cpu")
 
@@ -34,6 +37,21 @@ def _available(device: torch.device) -> str | None:
         return "torch.backends.mps.is_available() is False"
     elif device.type not in ("cpu", "cuda", "mps"):
         return "only cpu, cuda, cuda:N, mps and auto are supported"
+    return None
+
+
+def compile_unavailable(device: torch.device) -> str | None:
+    """Why ``compile=true`` cannot run on ``device`` here, or ``None`` if it can.
+
+    :func:`torch.compile` needs a Python that dynamo supports, and its CPU backend
+    (inductor) builds C++ kernels, so on the CPU it needs a C++ compiler (``$CXX``,
+    ``g++``, ``c++`` or ``clang++`` on ``PATH``). ``validate_config`` refuses
+    ``compile=true`` with this reason before a run directory exists.
+    """
+    if not torch._dynamo.is_dynamo_supported():
+        return f"torch.compile is not supported on Python {sys.version.split()[0]} with torch {torch.__version__}"
+    if device.type == "cpu" and not (os.environ.get("CXX") or any(shutil.which(cxx) for cxx in ("g++", "c++", "clang++"))):
+        return "torch.compile's CPU backend (inductor) needs a C++ compiler, and none is on PATH (nor in $CXX)"
     return None
 
 

@@ -35,7 +35,7 @@ from typing import Any, Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
-from torchrl_causal.trainers.device import resolve_device
+from torchrl_causal.trainers.device import compile_unavailable, resolve_device
 
 __all__ = [
     "ALGO_SCHEMAS",
@@ -425,9 +425,12 @@ def _check_expert(cfg: DictConfig) -> None:
 
 def _check_device(cfg: DictConfig) -> None:
     try:
-        resolve_device(cfg.device)
+        device = resolve_device(cfg.device)
     except ValueError as error:
         raise ConfigValueError(str(error)) from None
+    reason = compile_unavailable(device) if cfg.compile else None
+    if reason:
+        raise ConfigValueError(f"compile=true cannot run on {device} here: {reason}. Install one, or set compile=false")
 
 
 def _check_algorithm(cfg: DictConfig) -> None:
@@ -457,7 +460,7 @@ def validate_config(cfg: DictConfig) -> None:
 
     Raises:
         ConfigValueError: naming the key, its value and the allowed range; a device this
-            machine lacks; GAIL's actor with dropout; off-policy counts that do not
+            machine lacks; ``compile=true`` where torch.compile cannot run; GAIL's actor with dropout; off-policy counts that do not
             divide (``random_steps`` by ``frames_per_batch``, ``num_envs`` by
             ``collector_workers``); or the env without an expert.
         omegaconf.errors.OmegaConfBaseException: an interpolation that does not resolve or

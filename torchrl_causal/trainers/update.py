@@ -48,7 +48,8 @@ class ActorCriticUpdate:
     then runs the compiled backward graph); the optimiser steps stay eager so the
     scheduled learning rate never triggers a recompilation. Inductor is told to keep
     eager's random-number stream (``fallback_random``), so a compiled run draws the same
-    dropout masks and action samples as an eager one and gives the same numbers.
+    dropout masks and action samples as an eager one and gives the same numbers. Shapes
+    are static (``dynamic=False``): a batch of another size compiles a graph of its own.
 
     Args:
         loss: a :class:`~torchrl.objectives.SACLoss` (or subclass) whose networks are
@@ -131,7 +132,10 @@ class ActorCriticUpdate:
                                 else critic_scheduler(self.critic_optimizer, T_max=cosine_updates))
         self.updates = 0
         if compile:
-            options = dict(compile_options or {})
+            # Static shapes: a training run feeds one batch size, and a second compiled update
+            # of other network sizes in the same process would otherwise turn on automatic
+            # dynamic shapes, which vmap over the twin critics cannot trace.
+            options = {"dynamic": False, **(compile_options or {})}
             if options.get("backend", "inductor") == "inductor":
                 options["options"] = {"fallback_random": True, **options.get("options", {})}
             self._forward = torch.compile(self._losses, **options)
