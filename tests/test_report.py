@@ -54,8 +54,8 @@ def _episodes(mean_return: float, success_percent: float, n: int, spread: float 
 
 def make_fake_run(root: Path, label: str, *, seed: int = 0, env: str = "antmaze_medium", k: int = 10,
                   horizon: int = 1000, strength: float = 1.0, deploy=(None, None), train=(None, None),
-                  episodes: int = 1000, curve: bool = True) -> Path:
-    """A run directory as the trainers write it: resolved config, eval JSONs, curve CSV."""
+                  episodes: int = 1000, curve: bool = True, status: str = "complete") -> Path:
+    """A run directory as the trainers write it: resolved config, status, eval JSONs, curve CSV."""
     causal = label.startswith("c_")
     algo = label[2:] if causal else label
     run_dir = root / env / f"h{horizon}-cs{strength}-k{k}" / label / f"seed{seed}"
@@ -64,6 +64,7 @@ def make_fake_run(root: Path, label: str, *, seed: int = 0, env: str = "antmaze_
         "env": {"name": env, "horizon": horizon, "confounding_strength": strength},
         "window": {"k": k, "window_matched": False}, "algo": {"name": algo}, "causal": causal, "seed": seed,
     }), run_dir / "config.yaml")
+    (run_dir / "status.json").write_text(json.dumps({"status": status, "progress": 4, "total": 4, "unit": "epochs"}))
     for regime, (mean_return, success) in (("deploy", deploy), ("train", train)):
         if mean_return is None:
             continue
@@ -201,3 +202,12 @@ def test_corrupt_run_is_named(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="env.horizon"):
         load_runs(tmp_path)
     assert math.isnan(EvaluationResult("deploy", [], [], []).success_rate)
+
+
+def test_a_run_training_again_is_left_out_with_a_warning(tmp_path: Path, caplog) -> None:
+    make_fake_run(tmp_path, "c_sqil", deploy=(-100.0, 90.0), train=(-100.0, 90.0))
+    extended = make_fake_run(tmp_path, "sqil", deploy=(-300.0, 0.0), train=(-100.0, 90.0), status="interrupted")
+    with caplog.at_level("WARNING"):
+        runs = load_runs(tmp_path)
+    assert [run.label for run in runs] == ["c_sqil"]
+    assert f"left out {extended}: it is interrupted (4 of 4 epochs)" in caplog.text

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -21,6 +22,8 @@ from omegaconf import OmegaConf
 
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.trainers.run_directory import CONFIG_FILE, EVAL_DIR, TRAIN_CURVE, RunDirectory, run_label
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "Setting",
@@ -115,16 +118,30 @@ def load_run(run_dir: str | Path) -> RunRecord:
 
 
 def load_runs(root: str | Path) -> list[RunRecord]:
-    """Every run below ``root`` with at least one final evaluation, in path order."""
+    """Every complete run below ``root`` with at least one final evaluation, in path order.
+
+    A run directory whose final evaluations are there but whose status is not
+    ``"complete"`` is left out, with a warning naming it: its budget was raised and it is
+    training again (or that attempt stopped), so its evaluations belong to the earlier
+    budget and would be reported as the new one's.
+    """
     root = Path(root)
     if not root.exists():
         raise FileNotFoundError(f"runs folder {root} does not exist")
     runs = []
     for config_file in sorted(root.rglob(CONFIG_FILE)):
-        if (config_file.parent / EVAL_DIR).is_dir():
-            record = load_run(config_file.parent)
-            if record.evaluations:
-                runs.append(record)
+        if not (config_file.parent / EVAL_DIR).is_dir():
+            continue
+        record = load_run(config_file.parent)
+        if not record.evaluations:
+            continue
+        status = RunDirectory(record.path).read_status()
+        if status.get("status") != "complete":
+            log.warning("left out %s: it is %s (%s of %s %s), so its evaluations are from an earlier budget",
+                        record.path, status.get("status", "without a status"), status.get("progress", "?"),
+                        status.get("total", "?"), status.get("unit", "steps"))
+            continue
+        runs.append(record)
     return runs
 
 
