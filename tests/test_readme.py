@@ -105,12 +105,11 @@ def check_against_markdown(table: Table, path: Path) -> int:
 
 
 def test_every_results_table_is_marked() -> None:
-    results = README.read_text().split("\n## Results", 1)[1].split("\n## ", 1)[0]
-    lines = results.splitlines()
+    lines = README.read_text().splitlines()
     marked_headers = {index for index, _ in markdown_tables(lines)
                       if any(MARKER.search(line) for line in lines[max(0, index - 2):index])}
     figure_tables = [index for index, rows in markdown_tables(lines) if rows[0][0] in ("regime", "strength")]
-    assert figure_tables, "the README's results section has no tables"
+    assert len(figure_tables) >= 7, f"the README has {len(figure_tables)} results tables"
     unmarked = [rows for index, rows in markdown_tables(lines) if index in figure_tables and index not in marked_headers]
     assert not unmarked, f"results tables without a figures marker: {[rows[0] for rows in unmarked]}"
 
