@@ -28,6 +28,8 @@ from torchrl_causal.evaluation import (
 from torchrl_causal.evaluation.runs import eval_path
 from torchrl_causal.evaluation.tables import seed_effect_checks, seed_spread, seeds_markdown
 from torchrl_causal.report import main as report_main
+from torchrl_causal.status import main as status_main
+from torchrl_causal.status import run_statuses
 
 # Appendix F, AntMaze-Medium column: raw E[Y] and success rate (%), deployment regime.
 PAPER_RAW = {
@@ -211,3 +213,24 @@ def test_a_run_training_again_is_left_out_with_a_warning(tmp_path: Path, caplog)
         runs = load_runs(tmp_path)
     assert [run.label for run in runs] == ["c_sqil"]
     assert f"left out {extended}: it is interrupted (4 of 4 epochs)" in caplog.text
+
+
+def test_status_lists_every_run_with_its_state(tmp_path: Path, capsys) -> None:
+    make_fake_run(tmp_path, "c_sqil", deploy=(-100.0, 90.0), train=(-100.0, 87.0))
+    failed = make_fake_run(tmp_path, "sqil", status="failed", curve=False)
+    (failed / "status.json").write_text(json.dumps({"status": "failed", "error": "ValueError: bad", "progress": 3,
+                                                    "total": 10, "unit": "rounds"}))
+    stale = make_fake_run(tmp_path, "c_bc", deploy=(-100.0, 50.0), train=(-100.0, 50.0), status="running")
+    (stale / ".hydra").mkdir()
+    (stale / ".hydra" / "config.yaml").write_text("{}")
+    rows = {row["run"].split("/")[-2]: row for row in run_statuses(tmp_path)}
+    assert sorted(rows) == ["c_bc", "c_sqil", "sqil"]
+    assert (rows["c_sqil"]["status"], rows["c_sqil"]["progress"], rows["c_sqil"]["deploy success %"]) == (
+        "complete", "4 / 4 epochs (100%)", "90.0")
+    assert rows["sqil"]["status"] == "failed: ValueError: bad" and rows["sqil"]["progress"] == "3 / 10 rounds (30%)"
+    # no process holds its lock: the "running" it recorded is a dead writer's; its evaluations are not shown
+    assert (rows["c_bc"]["status"], rows["c_bc"]["deploy success %"]) == ("killed", "—")
+    status_main([f"runs={tmp_path}"])
+    assert "| killed |" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="does not exist"):
+        status_main([f"runs={tmp_path / 'missing'}"])

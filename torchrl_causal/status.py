@@ -1,0 +1,109 @@
+"""Where the runs below a folder stand: ``python -m torchrl_causal.status runs=<dir>``.
+
+One row per run directory (a folder holding ``config.yaml``, below ``runs``): its status
+(``running`` while a process holds its lock; ``killed`` when its file says running but no
+process does, i.e. the process died without recording its stop; ``interrupted``;
+``failed``, with the error; ``complete``), its progress against its budget, the best
+train-regime evaluation return so far, and its final success rates once it has them. A
+``killed`` or ``interrupted`` run continues from its last checkpoint when its command is
+run again. Final success rates are shown for complete runs only: a run training again
+after its budget was raised still holds the evaluations of the earlier budget.
+
+Examples:
+    >>> import tempfile
+    >>> from torchrl_causal.trainers import RunDirectory
+    >>> root = tempfile.mkdtemp()
+    >>> run = RunDirectory(f"{root}/rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0")
+    >>> run.path.mkdir(parents=True)
+    >>> _ = run.config_file.write_text("seed: 0")
+    >>> run.write_status("running", progress=50000, total=150000, unit="env steps", best_train_return=-91.5)
+    >>> print(status_markdown(run_statuses(root)))
+    | run | status | progress | best train return | train success % | deploy success % |
+    |---|---|---|---|---|---|
+    | rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0 | killed | 50000 / 150000 env steps (33%) | -91.5 | — | — |
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from omegaconf import OmegaConf
+
+from torchrl_causal.evaluation.metrics import EvaluationResult
+from torchrl_causal.trainers.run_directory import CONFIG_FILE, RunDirectory
+
+__all__ = ["run_statuses", "status_markdown", "main"]
+
+COLUMNS = ("run", "status", "progress", "best train return", "train success %", "deploy success %")
+
+
+def _progress(status: dict[str, Any]) -> str:
+    progress, total, unit = status.get("progress"), status.get("total"), status.get("unit")
+    if progress is None:
+        return "—"
+    if total == 0:
+        return "no training"  # the expert: evaluated, not trained
+    counted = f"{progress} / {total}" if total else f"{progress}"
+    return counted + (f" {unit}" if unit else "") + (f" ({100 * progress / total:.0f}%)" if total else "")
+
+
+def _success(run: RunDirectory, regime: str) -> str:
+    path = run.eval_path(regime)
+    if not path.is_file():
+        return "—"
+    return f"{100 * EvaluationResult.from_dict(json.loads(path.read_text())).success_rate:.1f}"
+
+
+def run_statuses(root: str | Path) -> list[dict[str, str]]:
+    """A row of :data:`COLUMNS` for every run directory below ``root``, in path order.
+
+    Raises:
+        FileNotFoundError: if ``root`` does not exist.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"runs folder {root} does not exist")
+    rows = []
+    for config_file in sorted(root.rglob(CONFIG_FILE)):
+        if any(part.startswith(".") for part in config_file.relative_to(root).parts[:-1]):
+            continue  # Hydra's own .hydra/config.yaml in a multirun job's folder
+        run = RunDirectory(config_file.parent)
+        status = run.read_status()
+        state = status.get("status", "not started")
+        if state == "failed" and status.get("error"):
+            state = f"failed: {status['error']}"
+        best = status.get("best_train_return")
+        # a run training again after its budget was raised still holds the earlier budget's evaluations
+        final = [_success(run, regime) if state == "complete" else "—" for regime in ("train", "deploy")]
+        rows.append(dict(zip(COLUMNS, (
+            str(run.path.relative_to(root)) or ".", state, _progress(status), "—" if best is None else f"{best:.1f}",
+            *final,
+        ))))
+    return rows
+
+
+def status_markdown(rows: Sequence[dict[str, str]]) -> str:
+    """The rows as a Markdown table."""
+    lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    lines += ["| " + " | ".join(row[c] for c in COLUMNS) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    args = OmegaConf.from_cli(list(sys.argv[1:] if argv is None else argv))
+    unknown = set(args) - {"runs"}
+    if unknown or "runs" not in args:
+        raise SystemExit("usage: python -m torchrl_causal.status runs=<dir>")
+    try:
+        rows = run_statuses(args.runs)
+    except FileNotFoundError as error:
+        raise SystemExit(f"error: {error}") from None
+    print(status_markdown(rows) if rows else f"no run directories below {args.runs}")
+
+
+if __name__ == "__main__":
+    main()
