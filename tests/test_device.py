@@ -240,8 +240,7 @@ def test_losses_are_averaged_on_device_and_logged_every_n_updates(tmp_path: Path
 # ---------------------------------------------------------------------------- torch.compile
 
 
-def _compile_unavailable() -> str | None:
-    return compile_unavailable(torch.device("cpu"))
+COMPILE_UNAVAILABLE = compile_unavailable(torch.device("cpu"))
 
 
 def test_compile_without_a_cxx_compiler_is_refused_before_a_run_directory_exists(tmp_path: Path, monkeypatch) -> None:
@@ -279,7 +278,7 @@ def _batches(count: int) -> list[TensorDict]:
     }, [8]) for _ in range(count)]
 
 
-@pytest.mark.skipif(_compile_unavailable() is not None, reason=str(_compile_unavailable()))
+@pytest.mark.skipif(COMPILE_UNAVAILABLE is not None, reason=str(COMPILE_UNAVAILABLE))
 def test_compiled_update_matches_eager() -> None:
     """Same seed, same batches: compiled and eager updates give the same losses and weights.
 

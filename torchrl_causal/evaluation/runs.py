@@ -21,7 +21,7 @@ from typing import Any, NamedTuple
 from omegaconf import OmegaConf
 
 from torchrl_causal.evaluation.metrics import EvaluationResult
-from torchrl_causal.trainers.run_directory import CONFIG_FILE, EVAL_DIR, TRAIN_CURVE, RunDirectory, run_label
+from torchrl_causal.trainers.run_directory import CONFIG_FILE, TRAIN_CURVE, RunDirectory, run_label
 
 log = logging.getLogger(__name__)
 
@@ -130,18 +130,16 @@ def load_runs(root: str | Path) -> list[RunRecord]:
         raise FileNotFoundError(f"runs folder {root} does not exist")
     runs = []
     for config_file in sorted(root.rglob(CONFIG_FILE)):
-        if not (config_file.parent / EVAL_DIR).is_dir():
+        run = RunDirectory(config_file.parent)
+        if not any(run.eval_path(regime).is_file() for regime in ("train", "deploy")):
             continue
-        record = load_run(config_file.parent)
-        if not record.evaluations:
-            continue
-        status = RunDirectory(record.path).read_status()
+        status = run.read_status()
         if status.get("status") != "complete":
             log.warning("left out %s: it is %s (%s of %s %s), so its evaluations are from an earlier budget",
-                        record.path, status.get("status", "without a status"), status.get("progress", "?"),
+                        run.path, status.get("status", "without a status"), status.get("progress", "?"),
                         status.get("total", "?"), status.get("unit", "steps"))
             continue
-        runs.append(record)
+        runs.append(load_run(run.path))
     return runs
 
 

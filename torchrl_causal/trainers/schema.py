@@ -430,7 +430,7 @@ def _check_device(cfg: DictConfig) -> None:
         raise ConfigValueError(str(error)) from None
     reason = compile_unavailable(device) if cfg.compile else None
     if reason:
-        raise ConfigValueError(f"compile=true cannot run on {device} here: {reason}. Install one, or set compile=false")
+        raise ConfigValueError(f"compile=true cannot run on {device} here: {reason}; set compile=false")
 
 
 def _check_algorithm(cfg: DictConfig) -> None:
