@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import shutil
 from pathlib import Path
 
 import pytest
@@ -25,7 +26,8 @@ from torchrl_causal.evaluation import (
     normalised_returns,
     write_report,
 )
-from torchrl_causal.evaluation.runs import eval_path
+from torchrl_causal.archive import main as archive_main
+from torchrl_causal.evaluation.runs import archive_runs, eval_path
 from torchrl_causal.evaluation.tables import seed_effect_checks, seed_spread, seeds_markdown
 from torchrl_causal.report import main as report_main
 from torchrl_causal.status import main as status_main
@@ -234,3 +236,92 @@ def test_status_lists_every_run_with_its_state(tmp_path: Path, capsys) -> None:
     assert "| killed |" in capsys.readouterr().out
     with pytest.raises(SystemExit, match="does not exist"):
         status_main([f"runs={tmp_path / 'missing'}"])
+
+
+def test_the_report_of_an_archive_equals_the_report_of_its_runs(paper_runs: Path, tmp_path_factory) -> None:
+    c_sqil = next(paper_runs.rglob("c_sqil/seed0"))
+    (c_sqil / "checkpoints").mkdir()
+    (c_sqil / "checkpoints" / "best.pt").write_bytes(bytes(64))
+    (c_sqil / "replay").mkdir()
+    (c_sqil / "replay" / "observation.memmap").write_bytes(bytes(64))
+    unfinished = make_fake_run(paper_runs, "sqil", seed=1, deploy=(-300.0, 0.0), train=(-100.0, 90.0),
+                               status="interrupted")
+    archive = tmp_path_factory.mktemp("archive")
+    archived = archive_runs(paper_runs, archive)
+    assert sorted(p.relative_to(archive) for p in archived) == sorted(
+        p.parent.relative_to(paper_runs) for p in paper_runs.rglob("config.yaml") if p.parent != unfinished)
+    assert not list(archive.rglob("*.pt")) and not list(archive.rglob("*.memmap"))
+    assert (archive / c_sqil.relative_to(paper_runs) / "logs" / "scalars" / "eval" / "train_return.csv").is_file()
+    reports = tmp_path_factory.mktemp("reports")
+    from_runs = write_report(paper_runs, reports / "runs", name="t")
+    from_archive = write_report(archive, reports / "archive", name="t")
+    for produced in ("markdown", "csv", "all_csv"):
+        assert getattr(from_archive, produced).read_text() == getattr(from_runs, produced).read_text()
+
+
+def test_archiving_again_replaces_a_runs_record_and_keeps_the_others(tmp_path_factory) -> None:
+    root, archive = tmp_path_factory.mktemp("runs"), tmp_path_factory.mktemp("archive")
+    run = make_fake_run(root, "c_bc", deploy=(-100.0, 50.0), train=(-100.0, 50.0), episodes=4)
+    elsewhere = make_fake_run(tmp_path_factory.mktemp("other_machine"), "bc", deploy=(-300.0, 0.0),
+                              train=(-100.0, 75.0), episodes=4)
+    archive_runs(elsewhere.parents[3], archive)
+    archive_runs(root, archive)
+    eval_path(run, "deploy").write_text(json.dumps(EvaluationResult("deploy", [True] * 4, [-1.0] * 4, [9] * 4).to_dict()))
+    archive_runs(root, archive)
+    by_label = {r.label: r for r in load_runs(archive)}
+    assert sorted(by_label) == ["bc", "c_bc"]
+    assert by_label["c_bc"].evaluations["deploy"].success_rate == 1.0
+    with pytest.raises(ValueError, match="must not contain one another"):
+        archive_runs(root, root / "archive")
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        archive_runs(root / "missing", archive)
+
+
+def test_archive_cli_names_what_it_copied(paper_runs: Path, tmp_path_factory, capsys) -> None:
+    archive = tmp_path_factory.mktemp("archive")
+    archive_main([f"runs={paper_runs}", f"out={archive}"])
+    assert f"archived {len(PAPER_RAW)} run(s) below {archive}" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="usage"):
+        archive_main([f"runs={paper_runs}"])
+
+
+def _tables(markdown: Path) -> list[str]:
+    """The table lines of a report, its across-seeds section (drawn from runs only) left out."""
+    lines, section = [], ""
+    for line in markdown.read_text().splitlines():
+        section = line if line.startswith("### ") else section
+        if line.startswith("|") and section != "### Across seeds":
+            lines.append(line)
+    return lines
+
+
+def test_carried_rows_print_as_the_runs_they_stand_for(paper_runs: Path, tmp_path_factory) -> None:
+    reports = tmp_path_factory.mktemp("reports")
+    make_fake_run(paper_runs, "sqil", seed=1, deploy=(-360.0, 2.0), train=(-120.0, 80.0))
+    full = write_report(paper_runs, reports / "full", name="t")
+    survivors = tmp_path_factory.mktemp("survivors")
+    for label in ("gail", "c_gail"):
+        for run in (paper_runs / "antmaze_medium" / "h1000-cs1.0-k10" / label).iterdir():
+            shutil.copytree(run, survivors / run.relative_to(paper_runs))
+    merged = write_report(survivors, reports / "merged", name="t", carried=full.all_csv)
+    assert _tables(merged.markdown) == _tables(full.markdown)
+    assert merged.csv.read_text() == full.csv.read_text()
+    assert merged.all_csv.read_text() == full.all_csv.read_text()
+    carried_line = next(line for line in merged.markdown.read_text().splitlines() if line.startswith("Carried from"))
+    assert "Expert, C-BC, C-SQIL, C-IQ-Learn, BC, SQIL, IQ-Learn." in carried_line
+    assert "C-GAIL" not in carried_line and "Carried from" not in full.markdown.read_text()
+
+
+def test_a_run_replaces_the_carried_row_of_its_label(paper_runs: Path, tmp_path_factory) -> None:
+    reports = tmp_path_factory.mktemp("reports")
+    earlier = write_report(paper_runs, reports / "earlier", name="t")
+    newer = tmp_path_factory.mktemp("newer")
+    make_fake_run(newer, "c_sqil", deploy=(-100.0, 50.0), train=(-100.0, 60.0))
+    merged = write_report(newer, reports / "merged", name="t", carried=earlier.all_csv)
+    with open(merged.csv, newline="") as handle:
+        rows = {(row["algorithm"], row["regime"]): row for row in csv.DictReader(handle)}
+    assert float(rows["c_sqil", "deploy"]["success_rate"]) == pytest.approx(0.5)
+    assert float(rows["c_gail", "deploy"]["success_rate"]) == pytest.approx(0.741)
+    assert len(rows) == 2 * len(PAPER_RAW)
+    with pytest.raises(ValueError, match="lacks the column"):
+        write_report(newer, reports / "bad", name="t", carried=earlier.csv)

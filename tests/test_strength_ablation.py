@@ -9,6 +9,7 @@ import pytest
 
 import torchrl_causal.strength_ablation as ablation
 from torchrl_causal.evaluate import evaluate_run
+from torchrl_causal.evaluation.runs import archive_runs
 from torchrl_causal.train import run
 from torchrl_causal.trainers import compose_config
 
@@ -72,3 +73,17 @@ def test_bad_strengths_and_mixed_settings_are_refused(runs_root: Path, tmp_path:
     run(compose_config([*TINY_BC, "causal=true", f"run_root={mixed}"]))
     with pytest.raises(ValueError, match="differ in more than the strength"):
         ablation.strength_ablation(mixed, (1.0,), EPISODES)
+
+
+def test_an_archive_gives_back_the_stored_records_without_the_checkpoints(runs_root: Path, tmp_path: Path,
+                                                                          monkeypatch) -> None:
+    first = _by_label(ablation.strength_ablation(runs_root, (0.5,), EPISODES))
+    archive_runs(runs_root, tmp_path / "archive")
+    assert not list((tmp_path / "archive").rglob("*.pt"))
+
+    def evaluate_again(*args, **kwargs):
+        raise AssertionError("re-evaluated a stored record")
+
+    monkeypatch.setattr("torchrl_causal.evaluate.open_run", evaluate_again)
+    again = _by_label(ablation.strength_ablation(tmp_path / "archive", (0.5,), EPISODES))
+    assert {key: r.returns for key, r in again.items()} == {key: r.returns for key, r in first.items()}

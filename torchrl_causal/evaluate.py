@@ -98,9 +98,9 @@ def main(argv: Sequence[str] | None = None) -> EvaluationResult:
     args = OmegaConf.from_cli(list(sys.argv[1:] if argv is None else argv))
     unknown = set(args) - _ARGS
     if unknown or "run_dir" not in args:
-        raise SystemExit(f"usage: python -m torchrl_causal.evaluate run_dir=<dir> [regime=deploy] [episodes=1000] "
-                         f"[num_envs=...] [seed=...] [confounding_strength=...] [trajectories=0] [save=true] [reuse=false] "
-                         f"[device=...]"
+        raise SystemExit("usage: python -m torchrl_causal.evaluate run_dir=<dir> [regime=deploy] [episodes=1000] "
+                         "[num_envs=...] [seed=...] [confounding_strength=...] [trajectories=0] [save=true] [reuse=false] "
+                         "[device=...]"
                          + (f"; unknown argument(s) {sorted(unknown)}" if unknown else ""))
     result = evaluate_run(**{k: args[k] for k in args})
     s = result.summary()

@@ -9,7 +9,6 @@ to a fixed goal cell. A horizon of 1000 steps is 100 s of simulated time.
 
 from __future__ import annotations
 
-import math
 import pathlib
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, ClassVar

@@ -14,10 +14,12 @@ from torchrl_causal.evaluation.tables import (
     CSV_COLUMNS,
     aggregate,
     csv_rows,
+    display_name,
     effect_checks,
     effect_markdown,
     lengths_markdown,
     raw_markdown,
+    read_reported_rows,
     seed_effect_checks,
     seeds_markdown,
     table1_markdown,
@@ -58,13 +60,30 @@ def _kept_notes(path: Path) -> str:
     return match.group(0) if match else ""
 
 
+def _carry(aggregated: dict[Setting, dict], carried: str | Path) -> dict[Setting, list[str]]:
+    """Adds to ``aggregated`` the rows of ``carried`` (an earlier ``_all.csv``) of the
+    labels no run holds in their setting; returns the labels added, per setting."""
+    added: dict[Setting, list[str]] = {}
+    for setting, rows in read_reported_rows(carried).items():
+        table = aggregated.setdefault(setting, {})
+        added[setting] = [label for label in rows if label not in table]
+        table.update({label: rows[label] for label in added[setting]})
+    return {setting: labels for setting, labels in added.items() if labels}
+
+
 def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, name: str | None = None,
-                 command: str | None = None) -> Report:
+                 command: str | None = None, carried: str | Path | None = None) -> Report:
     """Reads every run below ``runs_root`` and writes ``<out_dir>/<name>.{md,csv}``,
     ``<name>_all.csv`` (every setting, with setting columns) and the PNG figures.
 
     ``<name>.csv`` holds the main setting (the one with the most runs) with exactly the
     columns :data:`~torchrl_causal.evaluation.tables.CSV_COLUMNS`.
+
+    ``carried`` names an earlier report's ``_all.csv`` whose rows stand in for runs whose
+    records are gone (a lost machine; see ``python -m torchrl_causal.archive`` for keeping
+    them): a row is carried into the tables and CSVs unchanged where no run below
+    ``runs_root`` has its setting and label, and the Markdown names every carried row.
+    Figures and the across-seeds table come from the runs alone.
     """
     runs = load_runs(runs_root)
     if not runs:
@@ -74,6 +93,7 @@ def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, na
     envs = sorted({run.setting.env for run in runs})
     name = name or (envs[0] if len(envs) == 1 else "report")
     aggregated = aggregate(runs)
+    carried_labels = _carry(aggregated, carried) if carried is not None else {}
     main = _main_setting(runs)
 
     report = Report(out_dir / f"{name}.md", out_dir / f"{name}.csv", out_dir / f"{name}_all.csv", main_setting=main)
@@ -110,6 +130,10 @@ def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, na
                   f"Seeds: {', '.join(map(str, seeds))}. Normalised E[Y] shifts the worst algorithm of the row to 0 "
                   "(the reward is purely negative); ± is the return's standard deviation and the success "
                   "rate's standard error over the pooled episodes (as the paper's Table 1).", ""]
+        if setting in carried_labels:
+            lines += [f"Carried from `{Path(carried).name}` (an earlier report; their runs' records are not below "
+                      f"the runs folder, and the figures do not show them): "
+                      + ", ".join(display_name(label) for label in carried_labels[setting]) + ".", ""]
         for regime in ("deploy", "train"):
             if any(regime in regimes for regimes in table.values()):
                 lines += [f"### {regime.capitalize()} regime (Table 1 layout)", "", table1_markdown(table, regime), ""]

@@ -13,7 +13,7 @@ import csv
 import json
 import logging
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -21,7 +21,7 @@ from typing import Any, NamedTuple
 from omegaconf import OmegaConf
 
 from torchrl_causal.evaluation.metrics import EvaluationResult
-from torchrl_causal.trainers.run_directory import CONFIG_FILE, TRAIN_CURVE, RunDirectory, run_label
+from torchrl_causal.trainers.run_directory import CONFIG_FILE, RunDirectory, atomic_write_text, run_label
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +32,7 @@ __all__ = [
     "read_scalar_csv",
     "load_run",
     "load_runs",
+    "archive_runs",
     "mean_curve",
 ]
 
@@ -102,7 +103,7 @@ def load_run(run_dir: str | Path) -> RunRecord:
         data = json.loads(path.read_text())
         evaluations[data["regime"]] = EvaluationResult.from_dict(data)
         maze = data.get("maze", maze)
-    curve_file = run.log_dir / "scalars" / f"{TRAIN_CURVE}.csv"
+    curve_file = run.train_curve_file
     return RunRecord(
         path=run.path,
         label=run_label(cfg.algo.name, bool(cfg.causal), bool(OmegaConf.select(cfg, "window.window_matched"))),
@@ -128,7 +129,12 @@ def load_runs(root: str | Path) -> list[RunRecord]:
     root = Path(root)
     if not root.exists():
         raise FileNotFoundError(f"runs folder {root} does not exist")
-    runs = []
+    return [load_run(run.path) for run in _complete_runs(root)]
+
+
+def _complete_runs(root: Path) -> Iterator[RunDirectory]:
+    """The runs below ``root`` with a final evaluation whose status is ``"complete"``;
+    every other evaluated run is named in a warning."""
     for config_file in sorted(root.rglob(CONFIG_FILE)):
         run = RunDirectory(config_file.parent)
         if not any(run.eval_path(regime).is_file() for regime in ("train", "deploy")):
@@ -139,8 +145,56 @@ def load_runs(root: str | Path) -> list[RunRecord]:
                         run.path, status.get("status", "without a status"), status.get("progress", "?"),
                         status.get("total", "?"), status.get("unit", "steps"))
             continue
-        runs.append(load_run(run.path))
-    return runs
+        yield run
+
+
+def archive_runs(root: str | Path, out: str | Path) -> list[Path]:
+    """Copies the record of every complete run below ``root`` to the same relative path
+    below ``out`` and returns the archived run directories.
+
+    A record (:meth:`~torchrl_causal.trainers.RunDirectory.record_files`: config, window,
+    status, evaluation records, training curve) is what :func:`load_runs`, the report and
+    the strength ablation's stored evaluations read back; at well under a megabyte per
+    run it can be committed, so that a report is regenerated where the runs themselves
+    (checkpoints, replay data) are gone. Archiving several machines' runs into one
+    ``out`` builds one table: an archived run's files are replaced by its newer record,
+    every other run already in ``out`` is kept. Evaluating at settings no record holds
+    needs the original run directory (its ``checkpoints/best.pt``).
+
+    Raises:
+        FileNotFoundError: ``root`` does not exist.
+        ValueError: one of ``root`` and ``out`` lies inside the other.
+
+    Examples:
+        >>> import tempfile, pathlib
+        >>> from torchrl_causal.trainers import RunDirectory
+        >>> root, out = (pathlib.Path(tempfile.mkdtemp()) for _ in range(2))
+        >>> run = RunDirectory(root / "rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0")
+        >>> run.path.mkdir(parents=True)
+        >>> _ = run.config_file.write_text("seed: 0")
+        >>> run.write_status("complete", progress=150000, total=150000, unit="env steps")
+        >>> run.write_json(run.eval_path("deploy"), {"regime": "deploy"})
+        >>> [str(p.relative_to(out)) for p in archive_runs(root, out)]
+        ['rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0']
+        >>> sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+        ['rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0/config.yaml',
+         'rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0/eval/deploy.json',
+         'rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0/status.json']
+    """
+    root, out = Path(root).resolve(), Path(out).resolve()
+    if not root.exists():
+        raise FileNotFoundError(f"runs folder {root} does not exist")
+    if out == root or out.is_relative_to(root) or root.is_relative_to(out):
+        raise ValueError(f"archive folder {out} and runs folder {root} must not contain one another")
+    archived = []
+    for run in _complete_runs(root):
+        target = out / run.path.relative_to(root)
+        for path in run.record_files():
+            destination = target / path.relative_to(run.path)
+            destination.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(destination, path.read_text())
+        archived.append(target)
+    return archived
 
 
 def mean_curve(curves: Iterable[Sequence[tuple[int, float]]]) -> list[tuple[int, float]]:

@@ -22,6 +22,8 @@ from torchrl_causal.evaluation.runs import RunRecord, Setting
 
 __all__ = [
     "TABLE1_ALGORITHMS",
+    "ReportedResult",
+    "read_reported_rows",
     "CSV_COLUMNS",
     "REGIMES",
     "display_name",
@@ -55,8 +57,73 @@ CSV_COLUMNS: tuple[str, ...] = (
 )
 REGIMES: tuple[str, ...] = ("train", "deploy")
 
-# label -> regime -> result pooled over seeds
-Table = Mapping[str, Mapping[str, EvaluationResult]]
+
+
+@dataclass(frozen=True)
+class ReportedResult:
+    """One row of an earlier report's CSV: the metrics of an evaluation without its
+    episodes, for a table row whose run records are gone (see
+    :func:`~torchrl_causal.evaluation.write_report`'s ``carried``). It has
+    :class:`EvaluationResult`'s metrics and :meth:`~EvaluationResult.summary`, so every
+    table prints it as it printed the pooled result; it cannot be pooled with other
+    seeds, since the episodes are not there.
+
+    Examples:
+        >>> r = EvaluationResult("deploy", [True, False], [-1.0, -9.0], [4, 9], seeds=[0])
+        >>> ReportedResult.from_row(r.summary()).summary() == r.summary()
+        True
+    """
+
+    regime: str
+    success_rate: float
+    success_se: float
+    return_mean: float
+    return_std: float
+    ep_len_mean: float
+    ep_len_std: float
+    n_episodes: int
+    seed_count: int
+
+    @classmethod
+    def from_row(cls, row: Mapping[str, object]) -> ReportedResult:
+        """From a results-CSV row (:data:`CSV_COLUMNS`; an empty cell is NaN)."""
+        def number(key: str) -> float:
+            value = row[key]
+            return math.nan if value == "" else float(value)
+
+        return cls(str(row["regime"]), *(number(key) for key in (
+            "success_rate", "success_se", "return_mean", "return_std", "ep_len_mean", "ep_len_std")),
+            int(row["n_episodes"]), int(row["seeds"]))
+
+    def summary(self) -> dict[str, float | int | str]:
+        """The metrics as :meth:`EvaluationResult.summary` lists them."""
+        return {"regime": self.regime, "success_rate": self.success_rate, "success_se": self.success_se,
+                "return_mean": self.return_mean, "return_std": self.return_std, "ep_len_mean": self.ep_len_mean,
+                "ep_len_std": self.ep_len_std, "n_episodes": self.n_episodes, "seeds": self.seed_count}
+
+
+# label -> regime -> result pooled over seeds (or an earlier report's row)
+Table = Mapping[str, Mapping[str, EvaluationResult | ReportedResult]]
+
+
+def read_reported_rows(path: str | Path) -> dict[Setting, dict[str, dict[str, ReportedResult]]]:
+    """The rows of a report's ``<name>_all.csv`` (setting columns, then
+    :data:`CSV_COLUMNS`), grouped as :func:`aggregate` groups runs.
+
+    Raises:
+        FileNotFoundError: ``path`` does not exist.
+        ValueError: a column is missing.
+    """
+    with open(path, newline="") as handle:
+        reader = csv.DictReader(handle)
+        missing = {"env", "horizon", "strength", "k", *CSV_COLUMNS} - set(reader.fieldnames or ())
+        if missing:
+            raise ValueError(f"{path} is not a report's _all.csv: it lacks the column(s) {sorted(missing)}")
+        table: dict[Setting, dict[str, dict[str, ReportedResult]]] = defaultdict(lambda: defaultdict(dict))
+        for row in reader:
+            setting = Setting(row["env"], int(row["horizon"]), float(row["strength"]), int(row["k"]))
+            table[setting][row["algorithm"]][row["regime"]] = ReportedResult.from_row(row)
+    return {setting: dict(labels) for setting, labels in table.items()}
 
 
 def display_name(label: str) -> str:
@@ -155,7 +222,9 @@ def table1_markdown(table: Table, regime: str = "deploy") -> str:
     results = {label: table[label][regime] for label in labels}
     normalised = normalised_returns(table, regime)
     success = {label: 100 * r.success_rate for label, r in results.items()}
-    best_return, best_success = _best_non_expert(normalised), _best_non_expert(success)
+    # ties go to the first in Table 1's order, whatever order the table was built in
+    best_return = _best_non_expert({label: normalised[label] for label in labels})
+    best_success = _best_non_expert(success)
     header = [""] + [display_name(label) for label in labels]
     rows = [
         ["Norm. E[Y]"] + [
@@ -184,8 +253,8 @@ def raw_markdown(table: Table) -> str:
                 if result is not None else ["—", "—"]
             )
         counts = [str(table[label][regime].n_episodes) if regime in table[label] else "—" for regime in REGIMES]
-        seeds = {seed for result in table[label].values() for seed in result.seeds}
-        row += [" / ".join(counts), str(len(seeds))]
+        seeds = max(int(result.summary()["seeds"]) for result in table[label].values())
+        row += [" / ".join(counts), str(seeds)]
         rows.append(row)
     return _markdown(header, rows)
 

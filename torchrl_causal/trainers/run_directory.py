@@ -214,6 +214,10 @@ class RunDirectory:
         return self.path / REPLAY_DIR
 
     @property
+    def train_curve_file(self) -> Path:
+        return self.log_dir / "scalars" / f"{TRAIN_CURVE}.csv"
+
+    @property
     def last_checkpoint(self) -> Path:
         return self.path / CHECKPOINT_DIR / "last.pt"
 
@@ -225,6 +229,14 @@ class RunDirectory:
         """Where an evaluation record lives: ``eval/<regime>.json`` for the final evaluation
         of training, ``eval/<regime>-<settings>.json`` for any other."""
         return self.path / EVAL_DIR / (f"{regime}.json" if settings is None else f"{regime}-{settings}.json")
+
+    def record_files(self) -> list[Path]:
+        """The files that exist of the run's record: config, window, status, every
+        evaluation record and the training curve; what reports read back, without the
+        checkpoints, replay data and logs that training and re-evaluation need."""
+        files = [self.config_file, self.window_file, self.status_file, self.train_curve_file,
+                 *sorted((self.path / EVAL_DIR).glob("*.json"))]
+        return [path for path in files if path.is_file()]
 
     # ------------------------------------------------------------------ config
 
