@@ -9,6 +9,7 @@ import pytest
 
 import torchrl_causal.strength_ablation as ablation
 from torchrl_causal.evaluate import evaluate_run
+from torchrl_causal.evaluation.report import NOTES_BEGIN, NOTES_END
 from torchrl_causal.evaluation.runs import archive_runs
 from torchrl_causal.train import run
 from torchrl_causal.trainers import compose_config
@@ -87,3 +88,12 @@ def test_an_archive_gives_back_the_stored_records_without_the_checkpoints(runs_r
     monkeypatch.setattr("torchrl_causal.evaluate.open_run", evaluate_again)
     again = _by_label(ablation.strength_ablation(tmp_path / "archive", (0.5,), EPISODES))
     assert {key: r.returns for key, r in again.items()} == {key: r.returns for key, r in first.items()}
+
+
+def test_notes_written_by_hand_survive_a_rerun(runs_root: Path, tmp_path: Path) -> None:
+    args = [f"runs={runs_root}", "strengths=[0,1]", f"episodes={EPISODES}", f"out={tmp_path}", "name=ablation"]
+    path = ablation.main(args)
+    path.write_text(path.read_text() + f"\n{NOTES_BEGIN}\nWhy BC falls.\n{NOTES_END}\n")
+    text = ablation.main(args).read_text()
+    assert text.count("Why BC falls.") == 1 and "| C-BC |" in text
+    assert text.index("Why BC falls.") < text.index("| Algorithm |")

@@ -12,8 +12,9 @@ already exists with the same settings is read back instead of evaluated again, s
 interrupted ablation resumes and a finished one rewrites its report in seconds.
 
 Writes ``<out>/<name>.md`` (deploy success % ± SE per algorithm and strength, pooled over
-seeds, with the regenerating command) and ``<out>/<name>.png`` (success against strength,
-causal methods solid, non-causal dashed).
+seeds, with the regenerating command; a notes block written by hand between the report's
+markers is kept, as :func:`~torchrl_causal.evaluation.write_report` keeps it) and
+``<out>/<name>.png`` (success against strength, causal methods solid, non-causal dashed).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from omegaconf import OmegaConf
 
 from torchrl_causal.evaluate import evaluate_run
 from torchrl_causal.evaluation.plots import plot_ablation
+from torchrl_causal.evaluation.report import kept_notes
 from torchrl_causal.evaluation.runs import RunRecord, load_runs
 from torchrl_causal.evaluation.tables import aggregate, display_name, ordered_labels
 
@@ -97,16 +99,18 @@ def main(argv: Sequence[str] | None = None) -> Path:
     figure = plot_ablation(aggregate(records), "strength", out / f"{name}.png")
     command = " ".join(["python -m torchrl_causal.strength_ablation", *cli])
     setting = records[0].setting
+    path = out / f"{name}.md"
+    notes = kept_notes(path)
     text = "\n".join([
         f"# Confounding-strength ablation: {setting.env} (H={setting.horizon}, k={setting.k})", "",
         "Regenerate with:", "", "```bash", command, "```", "",
+        *([notes, ""] if notes else []),
         f"Deploy-regime success rate (%) ± SE of each run's selected policy, {episodes} episodes per strength "
         f"(evaluation seed {seed}), pooled over training seeds {sorted({r.seed for r in records})}. "
         "Strength s rotates the compass by s·π at deployment; training is unchanged.", "",
         strength_markdown(records), "",
         *([f"![strength ablation]({figure.name})", ""] if figure is not None else []),
     ])
-    path = out / f"{name}.md"
     path.write_text(text)
     print(text)
     return path

@@ -26,7 +26,7 @@ from torchrl_causal.evaluation.tables import (
     write_csv,
 )
 
-__all__ = ["Report", "write_report", "NOTES_BEGIN", "NOTES_END"]
+__all__ = ["Report", "write_report", "kept_notes", "NOTES_BEGIN", "NOTES_END"]
 
 # Hand-written analysis between these markers survives regeneration of the Markdown file.
 NOTES_BEGIN = "<!-- notes: kept when the report is regenerated -->"
@@ -53,7 +53,18 @@ def _main_setting(runs: Sequence[RunRecord]) -> Setting:
     return max(counts, key=lambda s: (counts[s], s.strength, s.horizon, -s.k))
 
 
-def _kept_notes(path: Path) -> str:
+def kept_notes(path: str | Path) -> str:
+    """The hand-written notes block of a results file (``NOTES_BEGIN`` ... ``NOTES_END``,
+    markers included) that its regeneration keeps; ``""`` when there is none.
+
+    Examples:
+        >>> import tempfile, pathlib
+        >>> md = pathlib.Path(tempfile.mkdtemp()) / "r.md"
+        >>> _ = md.write_text(f"# R\\n{NOTES_BEGIN}\\nWhy.\\n{NOTES_END}\\n| table |")
+        >>> kept_notes(md).splitlines()[1]
+        'Why.'
+    """
+    path = Path(path)
     if not path.is_file():
         return ""
     match = re.search(re.escape(NOTES_BEGIN) + r".*?" + re.escape(NOTES_END), path.read_text(), flags=re.S)
@@ -119,7 +130,7 @@ def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, na
     lines = [f"# Results: {name}", ""]
     if command:
         lines += ["Regenerate with:", "", "```bash", command.strip(), "```", ""]
-    notes = _kept_notes(report.markdown)
+    notes = kept_notes(report.markdown)
     if notes:
         lines += [notes, ""]
     ordered = [main] + sorted(s for s in aggregated if s != main)
