@@ -317,7 +317,10 @@ def test_a_run_replaces_the_carried_row_of_its_label(paper_runs: Path, tmp_path_
     earlier = write_report(paper_runs, reports / "earlier", name="t")
     newer = tmp_path_factory.mktemp("newer")
     make_fake_run(newer, "c_sqil", deploy=(-100.0, 50.0), train=(-100.0, 60.0))
+    make_fake_run(newer, "c_sqil", k=0, deploy=(-150.0, 30.0), train=(-150.0, 30.0))
+    make_fake_run(newer, "c_bc", k=0, deploy=(-150.0, 30.0), train=(-150.0, 30.0))
     merged = write_report(newer, reports / "merged", name="t", carried=earlier.all_csv)
+    assert merged.main_setting.k == 10  # 1 run and 8 carried rows there, 2 runs at k = 0
     with open(merged.csv, newline="") as handle:
         rows = {(row["algorithm"], row["regime"]): row for row in csv.DictReader(handle)}
     assert float(rows["c_sqil", "deploy"]["success_rate"]) == pytest.approx(0.5)

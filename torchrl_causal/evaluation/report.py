@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -44,11 +44,13 @@ class Report:
     main_setting: Setting | None = None
 
 
-def _main_setting(runs: Sequence[RunRecord]) -> Setting:
+def _main_setting(runs: Sequence[RunRecord], carried: Mapping[Setting, Sequence[str]]) -> Setting:
     counts: dict[Setting, int] = defaultdict(int)
     for run in runs:
         counts[run.setting] += 1
-    # Most runs first; ties go to the strongest confounding and the longest horizon,
+    for setting, labels in carried.items():
+        counts[setting] += len(labels)
+    # Most runs (a carried row counts as one) first; ties go to the strongest confounding and the longest horizon,
     # which is the paper's default configuration.
     return max(counts, key=lambda s: (counts[s], s.strength, s.horizon, -s.k))
 
@@ -87,7 +89,7 @@ def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, na
     """Reads every run below ``runs_root`` and writes ``<out_dir>/<name>.{md,csv}``,
     ``<name>_all.csv`` (every setting, with setting columns) and the PNG figures.
 
-    ``<name>.csv`` holds the main setting (the one with the most runs) with exactly the
+    ``<name>.csv`` holds the main setting (the most runs, a carried row counting as one) with the
     columns :data:`~torchrl_causal.evaluation.tables.CSV_COLUMNS`.
 
     ``carried`` names an earlier report's ``_all.csv`` whose rows stand in for runs whose
@@ -105,7 +107,7 @@ def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, na
     name = name or (envs[0] if len(envs) == 1 else "report")
     aggregated = aggregate(runs)
     carried_labels = _carry(aggregated, carried) if carried is not None else {}
-    main = _main_setting(runs)
+    main = _main_setting(runs, carried_labels)
 
     report = Report(out_dir / f"{name}.md", out_dir / f"{name}.csv", out_dir / f"{name}_all.csv", main_setting=main)
     write_csv(csv_rows(aggregated[main]), report.csv)
