@@ -45,13 +45,16 @@ def test_a_causal_policy_is_the_same_at_every_strength_and_strength_zero_is_trai
         assert results[label, 0.0].returns == train.returns  # deploy at strength 0 is the train regime
 
 
-def test_stored_records_are_read_back_not_evaluated_again(runs_root: Path, monkeypatch) -> None:
-    first = _by_label(ablation.strength_ablation(runs_root, (0.85,), EPISODES))
-
+def _refuse_evaluation(monkeypatch) -> None:
     def evaluate_again(*args, **kwargs):
         raise AssertionError("re-evaluated a stored record")
 
     monkeypatch.setattr("torchrl_causal.evaluate.open_run", evaluate_again)
+
+
+def test_stored_records_are_read_back_not_evaluated_again(runs_root: Path, monkeypatch) -> None:
+    first = _by_label(ablation.strength_ablation(runs_root, (0.85,), EPISODES))
+    _refuse_evaluation(monkeypatch)
     again = _by_label(ablation.strength_ablation(runs_root, (0.85,), EPISODES))
     assert {key: r.returns for key, r in again.items()} == {key: r.returns for key, r in first.items()}
     assert len(list(runs_root.rglob("deploy-n8-seed30000-envs4-cs0.85.json"))) == 2
@@ -81,11 +84,7 @@ def test_an_archive_gives_back_the_stored_records_without_the_checkpoints(runs_r
     first = _by_label(ablation.strength_ablation(runs_root, (0.5,), EPISODES))
     archive_runs(runs_root, tmp_path / "archive")
     assert not list((tmp_path / "archive").rglob("*.pt"))
-
-    def evaluate_again(*args, **kwargs):
-        raise AssertionError("re-evaluated a stored record")
-
-    monkeypatch.setattr("torchrl_causal.evaluate.open_run", evaluate_again)
+    _refuse_evaluation(monkeypatch)
     again = _by_label(ablation.strength_ablation(tmp_path / "archive", (0.5,), EPISODES))
     assert {key: r.returns for key, r in again.items()} == {key: r.returns for key, r in first.items()}
 
