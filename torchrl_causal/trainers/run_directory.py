@@ -232,10 +232,11 @@ class RunDirectory:
 
     def record_files(self) -> list[Path]:
         """The files that exist of the run's record: config, window, status, every
-        evaluation record and the training curve; what reports read back, without the
-        checkpoints, replay data and logs that training and re-evaluation need."""
-        files = [self.config_file, self.window_file, self.status_file, self.train_curve_file,
-                 *sorted((self.path / EVAL_DIR).glob("*.json"))]
+        evaluation record and the periodic evaluations' scalars (the training curve among
+        them); what reports read back, without the checkpoints, replay data and training
+        logs that training and re-evaluation need."""
+        files = [self.config_file, self.window_file, self.status_file,
+                 *sorted((self.path / EVAL_DIR).glob("*.json")), *sorted(self.train_curve_file.parent.glob("*.csv"))]
         return [path for path in files if path.is_file()]
 
     # ------------------------------------------------------------------ config
