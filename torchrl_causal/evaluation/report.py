@@ -50,8 +50,8 @@ def _main_setting(runs: Sequence[RunRecord], carried: Mapping[Setting, Sequence[
         counts[run.setting] += 1
     for setting, labels in carried.items():
         counts[setting] += len(labels)
-    # Most runs (a carried row counts as one) first; ties go to the strongest confounding and the longest horizon,
-    # which is the paper's default configuration.
+    # Most runs (a carried row counts as one) first; ties go to the strongest confounding
+    # and the longest horizon, which is the paper's default configuration.
     return max(counts, key=lambda s: (counts[s], s.strength, s.horizon, -s.k))
 
 
@@ -89,14 +89,15 @@ def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, na
     """Reads every run below ``runs_root`` and writes ``<out_dir>/<name>.{md,csv}``,
     ``<name>_all.csv`` (every setting, with setting columns) and the PNG figures.
 
-    ``<name>.csv`` holds the main setting (the most runs, a carried row counting as one) with the
-    columns :data:`~torchrl_causal.evaluation.tables.CSV_COLUMNS`.
+    ``<name>.csv`` holds the main setting (the most runs, a carried row counting as one) with
+    exactly the columns :data:`~torchrl_causal.evaluation.tables.CSV_COLUMNS`.
 
     ``carried`` names an earlier report's ``_all.csv`` whose rows stand in for runs whose
     records are gone (a lost machine; see ``python -m torchrl_causal.archive`` for keeping
     them): a row is carried into the tables and CSVs unchanged where no run below
     ``runs_root`` has its setting and label, and the Markdown names every carried row.
-    Figures and the across-seeds table come from the runs alone.
+    The training curves, trajectories and across-seeds table come from the runs alone; the
+    ablation plots, drawn from the tables, show carried rows too.
     """
     runs = load_runs(runs_root)
     if not runs:
@@ -145,7 +146,7 @@ def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, na
                   "rate's standard error over the pooled episodes (as the paper's Table 1).", ""]
         if setting in carried_labels:
             lines += [f"Carried from `{Path(carried).name}` (an earlier report; their runs' records are not below "
-                      f"the runs folder, and the figures do not show them): "
+                      "the runs folder, so the training curves and trajectories do not show them): "
                       + ", ".join(display_name(label) for label in carried_labels[setting]) + ".", ""]
         for regime in ("deploy", "train"):
             if any(regime in regimes for regimes in table.values()):
