@@ -41,6 +41,7 @@ def heading_from_quaternion(quaternion: np.ndarray) -> np.ndarray:
     ``(n, 4)``, the result ``(n, 2)``.
 
     Examples:
+        >>> import math
         >>> quarter_turn = np.array([[math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4)]])
         >>> heading_from_quaternion(quarter_turn).round(6) + 0.0
         array([[0., 1.]])

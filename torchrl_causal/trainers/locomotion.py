@@ -95,6 +95,7 @@ def make_locomotion_actor(body: nn.Module | None = None) -> ProbabilisticActor:
     :class:`~torchrl_causal.envs.AntMazeExpert` computes from the exported body.
 
     Examples:
+        >>> from tensordict import TensorDict
         >>> actor = make_locomotion_actor()
         >>> actor(TensorDict(observation=torch.zeros(2, 29), batch_size=[2]))["action"].shape
         torch.Size([2, 8])
