@@ -153,7 +153,7 @@ def archive_runs(root: str | Path, out: str | Path) -> list[Path]:
     below ``out`` and returns the archived run directories.
 
     A record (:meth:`~torchrl_causal.trainers.RunDirectory.record_files`: config, window,
-    status, evaluation records, training curve) is what :func:`load_runs`, the report and
+    status, evaluation records, the periodic evaluations' curves) is what :func:`load_runs`, the report and
     the strength ablation's stored evaluations read back; at well under a megabyte per
     run it can be committed, so that a report is regenerated where the runs themselves
     (checkpoints, replay data) are gone. Archiving several machines' runs into one
@@ -184,7 +184,7 @@ def archive_runs(root: str | Path, out: str | Path) -> list[Path]:
     root, out = Path(root).resolve(), Path(out).resolve()
     if not root.exists():
         raise FileNotFoundError(f"runs folder {root} does not exist")
-    if out == root or out.is_relative_to(root) or root.is_relative_to(out):
+    if out.is_relative_to(root) or root.is_relative_to(out):  # equal folders included
         raise ValueError(f"archive folder {out} and runs folder {root} must not contain one another")
     archived = []
     for run in _complete_runs(root):
