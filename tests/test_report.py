@@ -328,3 +328,12 @@ def test_a_run_replaces_the_carried_row_of_its_label(paper_runs: Path, tmp_path_
     assert len(rows) == 2 * len(PAPER_RAW)
     with pytest.raises(ValueError, match="lacks the column"):
         write_report(newer, reports / "bad", name="t", carried=earlier.csv)
+
+
+def test_a_record_keeps_trajectory_positions_to_a_tenth_of_a_millimetre_and_every_metric_exactly() -> None:
+    result = EvaluationResult("deploy", [True, False], [-1.23456789, -2.5], [3, 4],
+                              trajectories=[[[0.123456789, -2.0000499], [1.00005001, 3.0]]])
+    record = json.loads(json.dumps(result.to_dict()))
+    assert record["trajectories"] == [[[0.1235, -2.0], [1.0001, 3.0]]]
+    reloaded = EvaluationResult.from_dict(record)
+    assert reloaded == result and reloaded.returns == (-1.23456789, -2.5)

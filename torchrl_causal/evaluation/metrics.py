@@ -25,6 +25,10 @@ __all__ = ["EvaluationResult", "evaluate_policy"]
 
 Policy = Callable[[TensorDictBase], TensorDictBase]
 
+#: Decimals kept of a recorded trajectory position: plots need far less, and full floats
+#: were three quarters of an evaluation record's size.
+TRAJECTORY_DECIMALS = 4
+
 
 def _mean_std(values: Sequence[float]) -> tuple[float, float]:
     if not values:
@@ -43,7 +47,8 @@ class EvaluationResult:
         returns: one return (the latent reward ``Y`` summed over the episode) per episode.
         lengths: one length (steps until done) per episode.
         seeds: training seeds the episodes come from (several after :meth:`pool`).
-        trajectories: a few episodes' positions, each a list of ``[x, y]`` (for plots).
+        trajectories: a few episodes' positions, each a list of ``[x, y]`` (for plots;
+            :meth:`to_dict` keeps :data:`TRAJECTORY_DECIMALS` decimals of each).
 
     Examples:
         >>> r = EvaluationResult("deploy", successes=[True, False, True, True],
@@ -124,7 +129,8 @@ class EvaluationResult:
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
-        data["trajectories"] = [[list(map(float, p)) for p in path] for path in self.trajectories]
+        data["trajectories"] = [[[round(float(x), TRAJECTORY_DECIMALS) for x in point] for point in path]
+                                for path in self.trajectories]
         data["summary"] = self.summary()
         return data
 
