@@ -64,7 +64,7 @@ def test_the_report_has_one_row_per_algorithm_and_a_figure(runs_root: Path, tmp_
     path = ablation.main([f"runs={runs_root}", "strengths=[0,1]", f"episodes={EPISODES}", f"out={tmp_path}",
                           "name=ablation"])
     text = path.read_text()
-    assert "| Algorithm | 0 | 1 |" in text and "| C-BC |" in text and "| BC |" in text
+    assert "| Algorithm | Seeds | 0 | 1 |" in text and "| C-BC | 0 |" in text and "| BC | 0 |" in text
     assert (tmp_path / "ablation.png").stat().st_size > 0
     assert f"python -m torchrl_causal.strength_ablation runs={runs_root}" in text
 
@@ -94,5 +94,21 @@ def test_notes_written_by_hand_survive_a_rerun(runs_root: Path, tmp_path: Path) 
     path = ablation.main(args)
     path.write_text(path.read_text() + f"\n{NOTES_BEGIN}\nWhy BC falls.\n{NOTES_END}\n")
     text = ablation.main(args).read_text()
-    assert text.count("Why BC falls.") == 1 and "| C-BC |" in text
+    assert text.count("Why BC falls.") == 1 and "| C-BC | 0 |" in text
     assert text.index("Why BC falls.") < text.index("| Algorithm |")
+
+
+def test_an_archived_run_without_a_record_is_left_out_at_every_strength_with_a_warning(
+        runs_root: Path, tmp_path: Path, caplog) -> None:
+    ablation.strength_ablation(runs_root, (0.5, 1.0), EPISODES)
+    archive = tmp_path / "archive"
+    archive_runs(runs_root, archive)
+    bc_record = next(archive.rglob("bc/seed0/eval/deploy-n8-seed30000-envs4-cs0.5.json"))
+    bc_record.unlink()
+    records = ablation.strength_ablation(archive, (0.5, 1.0), EPISODES)
+    assert {(r.label, r.setting.strength) for r in records} == {("c_bc", 0.5), ("c_bc", 1.0)}
+    assert str(bc_record.parents[1]) in caplog.text and "no checkpoints/best.pt" in caplog.text
+    table = ablation.strength_markdown(records)
+    assert "| Algorithm | Seeds | 0.5 | 1 |" in table and "| C-BC | 0 |" in table and "| BC |" not in table
+    with pytest.raises(FileNotFoundError, match="selected policies are gone"):
+        ablation.strength_ablation(archive, (0.3,), EPISODES)

@@ -9,7 +9,11 @@ an evaluation, not new training: every run below ``runs`` (its selected policy,
 :func:`~torchrl_causal.evaluate.evaluate_run`, which keeps each record in
 ``<run_dir>/eval/deploy-n<episodes>-seed<seed>-envs<n>-cs<strength>.json``. A record that
 already exists with the same settings is read back instead of evaluated again, so an
-interrupted ablation resumes and a finished one rewrites its report in seconds.
+interrupted ablation resumes and a finished one rewrites its report in seconds, and an
+archive (``python -m torchrl_causal.archive``) gives back every record it holds. A run that
+lacks a record and whose selected policy is gone (an archived run) is left out at every
+strength, with a warning naming it, so that each row pools the same seeds in every column;
+the table names the seeds of each row.
 
 Writes ``<out>/<name>.md`` (deploy success % ± SE per algorithm and strength, pooled over
 seeds, with the regenerating command; a notes block written by hand between the report's
@@ -19,6 +23,7 @@ markers is kept, as :func:`~torchrl_causal.evaluation.write_report` keeps it) an
 
 from __future__ import annotations
 
+import logging
 import sys
 from collections.abc import Sequence
 from dataclasses import replace
@@ -31,11 +36,13 @@ from torchrl_causal.evaluation.plots import plot_ablation
 from torchrl_causal.evaluation.report import kept_notes
 from torchrl_causal.evaluation.runs import RunRecord, load_runs
 from torchrl_causal.evaluation.tables import aggregate, display_name, ordered_labels
+from torchrl_causal.trainers import CheckpointError
 
 __all__ = ["PAPER_STRENGTHS", "strength_ablation", "strength_markdown", "main"]
 
 PAPER_STRENGTHS: tuple[float, ...] = (0.15, 0.5, 0.85, 1.0)  # Appendix F's strength ablation
 _ARGS = {"runs", "strengths", "episodes", "seed", "out", "name"}
+log = logging.getLogger(__name__)
 
 
 def strength_ablation(runs_root: str | Path, strengths: Sequence[float] = PAPER_STRENGTHS, episodes: int = 1000,
@@ -45,7 +52,8 @@ def strength_ablation(runs_root: str | Path, strengths: Sequence[float] = PAPER_
     :func:`~torchrl_causal.evaluation.tables.aggregate`).
 
     Raises:
-        FileNotFoundError: no evaluated run below ``runs_root``.
+        FileNotFoundError: no evaluated run below ``runs_root``, or none that holds a record
+            or its selected policy for every strength.
         ValueError: a strength outside [0, 1], or runs of more than one task / horizon / window.
     """
     runs = load_runs(runs_root)
@@ -58,23 +66,34 @@ def strength_ablation(runs_root: str | Path, strengths: Sequence[float] = PAPER_
     bad = [s for s in strengths if not 0.0 <= float(s) <= 1.0]
     if bad:
         raise ValueError(f"strengths must lie in [0, 1], got {bad}")
-    return [
-        replace(run, setting=run.setting._replace(strength=float(strength)),
-                evaluations={"deploy": evaluate_run(run.path, "deploy", int(episodes), seed=int(seed),
-                                                    confounding_strength=float(strength), reuse=True)})
-        for run in runs for strength in strengths
-    ]
+    records = []
+    for run in runs:
+        try:
+            evaluations = {float(strength): evaluate_run(run.path, "deploy", int(episodes), seed=int(seed),
+                                                         confounding_strength=float(strength), reuse=True)
+                           for strength in strengths}
+        except CheckpointError as error:
+            log.warning("left out %s: %s, and it holds no record of every strength asked for", run.path, error)
+            continue
+        records += [replace(run, setting=run.setting._replace(strength=strength), evaluations={"deploy": result})
+                    for strength, result in evaluations.items()]
+    if not records:
+        raise FileNotFoundError(f"no run below {runs_root} could be evaluated at strengths {list(strengths)}: "
+                                "their selected policies are gone and they hold no such records")
+    return records
 
 
 def strength_markdown(records: Sequence[RunRecord]) -> str:
-    """Deploy success % ± SE, one row per algorithm, one column per strength."""
+    """Deploy success % ± SE, one row per algorithm (with the training seeds it pools), one
+    column per strength."""
     aggregated = aggregate(records)
     settings = sorted(aggregated, key=lambda s: s.strength)
     labels = ordered_labels({label for table in aggregated.values() for label in table})
-    lines = ["| Algorithm | " + " | ".join(f"{s.strength:g}" for s in settings) + " |",
-             "|---|" + "---|" * len(settings)]
+    seeds = {label: sorted({r.seed for r in records if r.label == label}) for label in labels}
+    lines = ["| Algorithm | Seeds | " + " | ".join(f"{s.strength:g}" for s in settings) + " |",
+             "|---|---|" + "---|" * len(settings)]
     for label in labels:
-        cells = []
+        cells = [", ".join(map(str, seeds[label]))]
         for setting in settings:
             result = aggregated[setting].get(label, {}).get("deploy")
             cells.append("—" if result is None else f"{100 * result.success_rate:.1f} ± {100 * result.success_se:.1f}")
@@ -106,7 +125,7 @@ def main(argv: Sequence[str] | None = None) -> Path:
         "Regenerate with:", "", "```bash", command, "```", "",
         *([notes, ""] if notes else []),
         f"Deploy-regime success rate (%) ± SE of each run's selected policy, {episodes} episodes per strength "
-        f"(evaluation seed {seed}), pooled over training seeds {sorted({r.seed for r in records})}. "
+        f"(evaluation seed {seed}), pooled over the training seeds of each row. "
         "Strength s rotates the compass by s·π at deployment; training is unchanged.", "",
         strength_markdown(records), "",
         *([f"![strength ablation]({figure.name})", ""] if figure is not None else []),
