@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+import torch
 
 import torchrl_causal.strength_ablation as ablation
 from torchrl_causal.evaluate import evaluate_run
@@ -61,8 +62,13 @@ def test_stored_records_are_read_back_not_evaluated_again(runs_root: Path, monke
 
 
 def test_the_report_has_one_row_per_algorithm_and_a_figure(runs_root: Path, tmp_path: Path) -> None:
-    path = ablation.main([f"runs={runs_root}", "strengths=[0,1]", f"episodes={EPISODES}", f"out={tmp_path}",
-                          "name=ablation"])
+    threads = torch.get_num_threads()
+    try:
+        path = ablation.main([f"runs={runs_root}", "strengths=[0,1]", f"episodes={EPISODES}", f"out={tmp_path}",
+                              "name=ablation", "threads=2"])
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(threads)
     text = path.read_text()
     assert "| Algorithm | Seeds | 0 | 1 |" in text and "| C-BC | 0 |" in text and "| BC | 0 |" in text
     assert (tmp_path / "ablation.png").stat().st_size > 0

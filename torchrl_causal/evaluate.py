@@ -11,6 +11,10 @@ setting that changes the numbers: the final evaluation of training
 (``eval/<regime>.json``, what the report reads) is never replaced.
 ``device=<cpu|cuda|...>`` picks where the policy runs; by default the run's own device
 when this machine has it, else the CPU (a run trained on a GPU evaluates anywhere).
+``threads=<n>`` (default 1, as training's ``threads``) sets ``torch.set_num_threads``. Torch's
+own default, a thread per core, oversubscribes a small machine that runs anything else: on
+2 cores with two evaluations at once, 1000 RoverMaze episodes of a C-IQ-Learn policy took
+325 s with it and 15 s with one thread each.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+import torch
 from omegaconf import OmegaConf
 from tensordict.nn import TensorDictModuleBase
 
@@ -29,10 +34,11 @@ from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.trainers.device import resolve_device
 from torchrl_causal.trainers.run_directory import RunDirectory
 
-__all__ = ["evaluate_run", "open_run", "record_settings", "main"]
+__all__ = ["DEFAULT_THREADS", "evaluate_run", "open_run", "record_settings", "main"]
 
 _ARGS = {"run_dir", "regime", "episodes", "num_envs", "seed", "confounding_strength", "save", "reuse", "trajectories",
-         "device"}
+         "device", "threads"}
+DEFAULT_THREADS = 1
 
 
 def record_settings(episodes: int, seed: int, num_envs: int, confounding_strength: float | None) -> str:
@@ -100,9 +106,10 @@ def main(argv: Sequence[str] | None = None) -> EvaluationResult:
     if unknown or "run_dir" not in args:
         raise SystemExit("usage: python -m torchrl_causal.evaluate run_dir=<dir> [regime=deploy] [episodes=1000] "
                          "[num_envs=...] [seed=...] [confounding_strength=...] [trajectories=0] [save=true] [reuse=false] "
-                         "[device=...]"
+                         "[device=...] [threads=1]"
                          + (f"; unknown argument(s) {sorted(unknown)}" if unknown else ""))
-    result = evaluate_run(**{k: args[k] for k in args})
+    torch.set_num_threads(int(args.get("threads", DEFAULT_THREADS)))
+    result = evaluate_run(**{k: args[k] for k in args if k != "threads"})
     s = result.summary()
     print(f"{args.run_dir} [{s['regime']}] episodes {s['n_episodes']}: success {100 * s['success_rate']:.1f}% "
           f"± {100 * s['success_se']:.1f}, E[Y] {s['return_mean']:.1f} ± {s['return_std']:.1f}, "

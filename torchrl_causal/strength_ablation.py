@@ -1,6 +1,6 @@
 """The confounding-strength ablation of trained runs (the paper's Appendix F):
 ``python -m torchrl_causal.strength_ablation runs=<dir> [strengths=[0.15,0.5,0.85,1.0]]
-[episodes=1000] [seed=30000] [out=<dir>] [name=<str>]``.
+[episodes=1000] [seed=30000] [out=<dir>] [name=<str>] [threads=1]``.
 
 The strength only sets how far the deployment regime shifts the confounded sensor
 (the compass is rotated by ``strength * pi``); training never sees it. So the ablation is
@@ -29,9 +29,10 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
+import torch
 from omegaconf import OmegaConf
 
-from torchrl_causal.evaluate import evaluate_run
+from torchrl_causal.evaluate import DEFAULT_THREADS, evaluate_run
 from torchrl_causal.evaluation.plots import plot_ablation
 from torchrl_causal.evaluation.report import kept_notes
 from torchrl_causal.evaluation.runs import RunRecord, load_runs
@@ -41,7 +42,7 @@ from torchrl_causal.trainers import CheckpointError
 __all__ = ["PAPER_STRENGTHS", "strength_ablation", "strength_markdown", "main"]
 
 PAPER_STRENGTHS: tuple[float, ...] = (0.15, 0.5, 0.85, 1.0)  # Appendix F's strength ablation
-_ARGS = {"runs", "strengths", "episodes", "seed", "out", "name"}
+_ARGS = {"runs", "strengths", "episodes", "seed", "out", "name", "threads"}
 log = logging.getLogger(__name__)
 
 
@@ -107,10 +108,11 @@ def main(argv: Sequence[str] | None = None) -> Path:
     unknown = set(args) - _ARGS
     if unknown or "runs" not in args:
         raise SystemExit("usage: python -m torchrl_causal.strength_ablation runs=<dir> [strengths=[0.15,0.5,0.85,1.0]] "
-                         "[episodes=1000] [seed=30000] [out=<dir>] [name=<str>]"
+                         "[episodes=1000] [seed=30000] [out=<dir>] [name=<str>] [threads=1]"
                          + (f"; unknown argument(s) {sorted(unknown)}" if unknown else ""))
     strengths = [float(s) for s in args.get("strengths", PAPER_STRENGTHS)]
     episodes, seed = int(args.get("episodes", 1000)), int(args.get("seed", 30_000))
+    torch.set_num_threads(int(args.get("threads", DEFAULT_THREADS)))  # see torchrl_causal.evaluate
     records = strength_ablation(args.runs, strengths, episodes, seed)
     out = Path(args.get("out", Path(args.runs) / "report"))
     out.mkdir(parents=True, exist_ok=True)
