@@ -172,8 +172,8 @@ def test_across_seeds_table_has_each_seed_and_the_seed_standard_error(tmp_path: 
     table = seeds_markdown(load_runs(tmp_path))
     c_sqil = next(line for line in table.splitlines() if line.startswith("| C-SQIL"))
     # deploy: mean 90, sample std 10, SE 10 / sqrt(3) = 5.77
-    assert c_sqil == "| C-SQIL | 90.0, 90.0, 90.0 | 90.0 ± 0.0 | 80.0, 90.0, 100.0 | 90.0 ± 5.8 |"
-    assert "| SQIL | 95.0 | 95.0 | 0.0 | 0.0 |" in table  # one seed: no spread
+    assert c_sqil == "| C-SQIL | 0: 90.0, 1: 90.0, 2: 90.0 | 90.0 ± 0.0 | 0: 80.0, 1: 90.0, 2: 100.0 | 90.0 ± 5.8 |"
+    assert "| SQIL | 0: 95.0 | 95.0 | 0: 0.0 | 0.0 |" in table  # one seed: no spread
     assert seed_spread([0.2, 0.4]) == pytest.approx((0.3, 0.1))
     with pytest.raises(ValueError, match="at least one"):
         seed_spread([])

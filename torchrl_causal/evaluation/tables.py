@@ -301,7 +301,8 @@ def _success_by_seed(runs: Iterable[RunRecord]) -> dict[str, dict[str, dict[int,
 
 
 def seeds_markdown(runs: Iterable[RunRecord]) -> str:
-    """Success rate of every seed and its mean ± standard error over seeds, both regimes.
+    """Success rate of every seed (``seed: %``, so that a row missing a seed says which) and
+    its mean ± standard error over seeds, both regimes.
 
     The other tables pool the episodes of all seeds (their ± is the episode-level standard
     error, which is what the paper's Table 1 reports: 87.6 ± 1.0 is the binomial error of
@@ -315,12 +316,12 @@ def seeds_markdown(runs: Iterable[RunRecord]) -> str:
     for label in ordered_labels(rates):
         row = [display_name(label)]
         for regime in REGIMES:
-            percents = [100 * rate for rate in rates[label].get(regime, {}).values()]
-            if not percents:
+            by_seed = {seed: 100 * rate for seed, rate in rates[label].get(regime, {}).items()}
+            if not by_seed:
                 row += ["—", "—"]
                 continue
-            row.append(", ".join(f"{value:.1f}" for value in percents))
-            row.append(_pm(*seed_spread(percents)))
+            row.append(", ".join(f"{seed}: {value:.1f}" for seed, value in by_seed.items()))
+            row.append(_pm(*seed_spread(list(by_seed.values()))))
         rows.append(row)
     return _markdown(header, rows)
 
