@@ -74,7 +74,7 @@ def strength_ablation(runs_root: str | Path, strengths: Sequence[float] = PAPER_
                                                          confounding_strength=float(strength), reuse=True)
                            for strength in strengths}
         except CheckpointError as error:
-            log.warning("left out %s: %s, and it holds no record of every strength asked for", run.path, error)
+            log.warning("left out: %s, and it holds no record of every strength asked for", error)
             continue
         records += [replace(run, setting=run.setting._replace(strength=strength), evaluations={"deploy": result})
                     for strength, result in evaluations.items()]
