@@ -61,14 +61,10 @@ def test_stored_records_are_read_back_not_evaluated_again(runs_root: Path, monke
     assert len(list(runs_root.rglob("deploy-n8-seed30000-envs4-cs0.85.json"))) == 2
 
 
-def test_the_report_has_one_row_per_algorithm_and_a_figure(runs_root: Path, tmp_path: Path) -> None:
-    threads = torch.get_num_threads()
-    try:
-        path = ablation.main([f"runs={runs_root}", "strengths=[0,1]", f"episodes={EPISODES}", f"out={tmp_path}",
-                              "name=ablation", "threads=2"])
-        assert torch.get_num_threads() == 2
-    finally:
-        torch.set_num_threads(threads)
+def test_the_report_has_one_row_per_algorithm_and_a_figure(runs_root: Path, tmp_path: Path, torch_threads) -> None:
+    path = ablation.main([f"runs={runs_root}", "strengths=[0,1]", f"episodes={EPISODES}", f"out={tmp_path}",
+                          "name=ablation", "threads=2"])
+    assert torch.get_num_threads() == 2
     text = path.read_text()
     assert "| Algorithm | Seeds | 0 | 1 |" in text and "| C-BC | 0 |" in text and "| BC | 0 |" in text
     assert (tmp_path / "ablation.png").stat().st_size > 0

@@ -364,7 +364,7 @@ def test_route_choice_bc_reproduces_the_appendix_values(tmp_path: Path) -> None:
             assert abs(result.return_mean - value) < 4 * result.success_se + 1e-9, (causal, regime, result.return_mean)
 
 
-def test_evaluate_cli_writes_its_own_record(trained_runs) -> None:
+def test_evaluate_cli_writes_its_own_record(trained_runs, torch_threads) -> None:
     from torchrl_causal.evaluate import main as evaluate_main
 
     root = trained_runs["rovermaze_u"]
@@ -375,13 +375,9 @@ def test_evaluate_cli_writes_its_own_record(trained_runs) -> None:
                                 "confounding_strength=0.5"])
         assert result.n_episodes == 6 and result.regime == "deploy"
         assert (record.path / "eval" / "deploy-n6-seed30000-envs3-cs0.5.json").is_file()
-        threads = torch.get_num_threads()
-        try:
-            torch.set_num_threads(2)
-            evaluate_main([f"run_dir={record.path}", "regime=deploy", "episodes=5", "num_envs=5"])
-            assert torch.get_num_threads() == 1  # the CLI's default, not torch's thread per core
-        finally:
-            torch.set_num_threads(threads)
+        torch.set_num_threads(2)
+        evaluate_main([f"run_dir={record.path}", "regime=deploy", "episodes=5", "num_envs=5"])
+        assert torch.get_num_threads() == 1  # the CLI's default, not torch's thread per core
         assert (record.path / "eval" / "deploy-n5-seed30000-envs5.json").is_file()
         assert (record.path / "eval" / "deploy.json").read_bytes() == final  # training's record untouched
     assert len(load_runs(root)) == 9
