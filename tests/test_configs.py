@@ -252,6 +252,7 @@ def test_each_table_row_is_the_run_it_names(row: str) -> None:
     assert cfg.algo.name == row.removeprefix("c_").removesuffix("_wm")
     if row.endswith("iq_learn_garg"):
         assert cfg.algo.loss.variant == "iq_learn"
+        assert cfg.algo.actor_optimizer.lr == 3e-5  # Garg et al.'s online commands (actor_lr)
     elif row.endswith("iq_learn"):
         assert cfg.algo.loss.variant == "paper"
 

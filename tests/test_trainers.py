@@ -284,6 +284,7 @@ def test_interrupt_at_a_random_step_then_resume_equals_an_uninterrupted_run(tmp_
     step = random.Random(f"{algo}-resume").randint(1, iterations - 1)
     with _interrupt_at(trainer_class, step), pytest.raises(RunInterrupted, match="interrupted by SIGINT") as stop:
         run(interrupted)
+    interrupted_at = RunDirectory(interrupted.run_dir).read_status()["progress"]
     assert stop.value.exit_code == 130
     run_dir = RunDirectory(interrupted.run_dir)
     assert run_dir.read_status()["status"] == "interrupted"
@@ -302,6 +303,33 @@ def test_interrupt_at_a_random_step_then_resume_equals_an_uninterrupted_run(tmp_
     logs = [{path.relative_to(Path(cfg.run_dir)): read_scalar_csv(path)
              for path in (Path(cfg.run_dir) / "logs/scalars").rglob("*.csv")} for cfg in (straight, interrupted)]
     assert logs[0] == logs[1] and len(logs[0]) > 2
+    # One attempt per start: the straight run's, and the interrupted run's two.
+    attempts = [RunDirectory(cfg.run_dir).read_attempts() for cfg in (straight, interrupted)]
+    assert [a["progress"] for a in attempts[0]] == [0]
+    assert [a["progress"] for a in attempts[1]] == [0, interrupted_at]
+    assert attempts[1][0] == {**attempts[1][1], "progress": 0} == attempts[0][0]
+
+
+def test_a_resume_under_other_code_is_logged_and_recorded(tmp_path: Path, monkeypatch, caplog) -> None:
+    from torchrl_causal.trainers import base
+
+    cfg = tiny_config(tmp_path, "rovermaze_u", "bc", True, "algo.epochs=4", "algo.patience=10")
+    with _interrupt_at(get_class(cfg.algo.trainer), 2), pytest.raises(RunInterrupted):
+        run(cfg)
+    identity = base.code_identity
+
+    def edited(compile: bool, device) -> dict:
+        return {**identity(compile, device), "source": "0123456789ab"}
+
+    monkeypatch.setattr(base, "code_identity", edited)
+    with caplog.at_level("WARNING"):
+        run(cfg)
+    attempts = RunDirectory(cfg.run_dir).read_attempts()
+    assert [a["source"] for a in attempts] == [identity(False, "cpu")["source"], "0123456789ab"]
+    assert [a["progress"] for a in attempts] == [0, 2]
+    warned = [r.getMessage() for r in caplog.records if "other code" in r.getMessage()]
+    assert len(warned) == 1 and f"source: '{attempts[0]['source']}' -> '0123456789ab'" in warned[0]
+    assert RunDirectory(cfg.run_dir).code_file in RunDirectory(cfg.run_dir).record_files()
 
 
 def test_replay_buffer_lives_in_the_run_directory_not_in_the_checkpoint(tmp_path: Path) -> None:

@@ -5,6 +5,7 @@ A run directory (``cfg.run_dir``) holds::
     config.yaml              the full resolved config of the run
     window.json              the adjustment window the policy was trained on
     status.json              {"status": "running" | "interrupted" | "failed" | "complete", counters}
+    code.json                every attempt's code and runtime (:mod:`~torchrl_causal.trainers.provenance`)
                              (read as "killed" when it says running and no process holds .lock)
     train.log                the run's log lines (progress, evaluations, resume, errors)
     checkpoints/last.pt      networks, optimisers, schedulers, RNG states and counters (resume)
@@ -48,6 +49,7 @@ __all__ = [
     "CONFIG_FILE",
     "WINDOW_FILE",
     "STATUS_FILE",
+    "CODE_FILE",
     "TRAIN_LOG",
     "EVAL_DIR",
     "LOG_DIR",
@@ -67,6 +69,7 @@ __all__ = [
 CONFIG_FILE = "config.yaml"
 WINDOW_FILE = "window.json"
 STATUS_FILE = "status.json"
+CODE_FILE = "code.json"
 TRAIN_LOG = "train.log"
 EVAL_DIR = "eval"
 LOG_DIR = "logs"
@@ -202,6 +205,10 @@ class RunDirectory:
         return self.path / STATUS_FILE
 
     @property
+    def code_file(self) -> Path:
+        return self.path / CODE_FILE
+
+    @property
     def train_log(self) -> Path:
         return self.path / TRAIN_LOG
 
@@ -235,7 +242,7 @@ class RunDirectory:
         evaluation record and the periodic evaluations' scalars (the training curve among
         them); what reports read back, without the checkpoints, replay data and training
         logs that training and re-evaluation need."""
-        files = [self.config_file, self.window_file, self.status_file,
+        files = [self.config_file, self.window_file, self.status_file, self.code_file,
                  *sorted((self.path / EVAL_DIR).glob("*.json")), *sorted(self.train_curve_file.parent.glob("*.csv"))]
         return [path for path in files if path.is_file()]
 
@@ -375,6 +382,27 @@ class RunDirectory:
     def update_status(self, status: str, **fields: Any) -> None:
         """Like :meth:`write_status`, keeping the fields already recorded."""
         self.write_status(status, **{**{k: v for k, v in self.read_status().items() if k != "status"}, **fields})
+
+    def read_attempts(self) -> list[dict[str, Any]]:
+        """Every attempt recorded by :meth:`record_attempt`, oldest first."""
+        return self.read_json(self.code_file)["attempts"] if self.code_file.is_file() else []
+
+    def record_attempt(self, identity: Mapping[str, Any], progress: int) -> dict[str, Any] | None:
+        """Appends an attempt that starts at ``progress`` under ``identity`` (what
+        :func:`~torchrl_causal.trainers.provenance.code_identity` returns) to ``code.json``;
+        returns the attempt before it, ``None`` for the first.
+
+        Examples:
+            >>> import tempfile
+            >>> run = RunDirectory(tempfile.mkdtemp())
+            >>> run.record_attempt({"source": "a"}, progress=0) is None
+            True
+            >>> run.record_attempt({"source": "b"}, progress=40)
+            {'progress': 0, 'source': 'a'}
+        """
+        attempts = self.read_attempts()
+        self.write_json(self.code_file, {"attempts": [*attempts, {"progress": progress, **identity}]})
+        return attempts[-1] if attempts else None
 
     # ------------------------------------------------------------------ records
 
