@@ -18,6 +18,7 @@ from hydra.utils import get_class
 from omegaconf import OmegaConf
 from tensordict import MemoryMappedTensor, TensorDict
 
+from torchrl_causal.data import read_metadata
 from torchrl_causal.evaluation import load_runs, write_report
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.runs import read_scalar_csv
@@ -316,16 +317,17 @@ def test_a_resume_under_other_code_is_logged_and_recorded(tmp_path: Path, monkey
     cfg = tiny_config(tmp_path, "rovermaze_u", "bc", True, "algo.epochs=4", "algo.patience=10")
     with _interrupt_at(get_class(cfg.algo.trainer), 2), pytest.raises(RunInterrupted):
         run(cfg)
-    identity = base.code_identity
+    identity = base.attempt_identity
 
-    def edited(compile: bool, device) -> dict:
-        return {**identity(compile, device), "source": "0123456789ab"}
+    def edited(demonstrations, compile: bool, device) -> dict:
+        return {**identity(demonstrations, compile, device), "source": "0123456789ab"}
 
-    monkeypatch.setattr(base, "code_identity", edited)
+    monkeypatch.setattr(base, "attempt_identity", edited)
     with caplog.at_level("WARNING"):
         run(cfg)
     attempts = RunDirectory(cfg.run_dir).read_attempts()
-    assert [a["source"] for a in attempts] == [identity(False, "cpu")["source"], "0123456789ab"]
+    assert [a["source"] for a in attempts] == [identity(None, False, "cpu")["source"], "0123456789ab"]
+    assert attempts[0]["demonstrations"] == read_metadata(cfg.demos.path)["checksum"][:12]
     assert [a["progress"] for a in attempts] == [0, 2]
     warned = [r.getMessage() for r in caplog.records if "other code" in r.getMessage()]
     assert len(warned) == 1 and f"source: '{attempts[0]['source']}' -> '0123456789ab'" in warned[0]

@@ -32,11 +32,12 @@ from omegaconf import DictConfig, OmegaConf
 from tensordict.nn import TensorDictModuleBase
 from torchrl.record.loggers import Logger
 
+from torchrl_causal.data import read_metadata
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.progress import progress
 from torchrl_causal.trainers.device import resolve_device
 from torchrl_causal.trainers.interrupts import RunInterrupted, deferred_signals
-from torchrl_causal.trainers.provenance import code_identity, identity_changes
+from torchrl_causal.trainers.provenance import attempt_identity, identity_changes
 from torchrl_causal.trainers.run_directory import TRAIN_CURVE, ConfigMismatchError, RunDirectory, atomic_write_text
 
 __all__ = ["Score", "Trainer"]
@@ -244,12 +245,12 @@ class Trainer(ABC):
         self.logger = instantiate(self.cfg.logger)(log_dir=str(self.run.path))
         if resumed:
             log.info("resumed %s at %d %s", self.run.path, self.progress, self.unit)
-        identity = code_identity(self.cfg.compile, self.device)
+        identity = attempt_identity(read_metadata(self.cfg.demos.path)["checksum"], self.cfg.compile, self.device)
         previous = self.run.record_attempt(identity, self.progress)
         changes = identity_changes(previous, identity) if resumed and previous is not None else {}
         if changes:
             listed = "; ".join(f"{key}: {old!r} -> {new!r}" for key, (old, new) in changes.items())
-            log.warning("%s resumes under other code or runtime than its last attempt (%s): its results mix both, "
+            log.warning("%s resumes under other code, data or runtime than its last attempt (%s): its results mix both, "
                         "and a rerun from scratch will not repeat them", self.run.path, listed)
         self.write_status("running")
         label = f"{self.cfg.algo.name}{' (causal)' if self.cfg.causal else ''} seed {self.cfg.seed}"

@@ -1,9 +1,12 @@
-"""Which code and runtime trained a run, attempt by attempt.
+"""Which code, data and runtime trained a run, attempt by attempt.
 
-A run's config identifies what it computes, but not the code that computed it: a fix to a
-loss, a change of floating-point summation order or another torch leaves ``config.yaml``
-as it was and changes the numbers. Two runs of one config and seed on this library are
-bit-identical only under the same code, torch and runtime (``compile``, ``device``), so
+A run's config identifies what it computes, but not everything it computes it from: a fix
+to a loss, a change of floating-point summation order, another torch or a regenerated
+demonstration set (``demos.path`` is a runtime key) leaves ``config.yaml`` as it was and
+changes the numbers. Two runs of one config and seed are bit-identical under the same
+code, torch, demonstrations and runtime (``compile``, ``device``): measured for eager and
+compiled runs, straight or interrupted and resumed, in ``tests/test_trainers.py`` and on
+RoverMaze-Medium's C-SQIL config (``results/rovermaze_medium.md``, "Repeatability"). So
 each attempt of a run (its start, and every resume) records them in ``code.json``; a
 resume under other ones says so in the run's log, and the run's record (what
 ``python -m torchrl_causal.archive`` keeps) carries the whole list.
@@ -19,12 +22,12 @@ from typing import Any
 
 import torch
 
-__all__ = ["PACKAGE_DIR", "RUNTIME_FIELDS", "code_identity", "identity_changes", "source_fingerprint"]
+__all__ = ["PACKAGE_DIR", "RUNTIME_FIELDS", "attempt_identity", "identity_changes", "source_fingerprint"]
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 
 #: The fields of an attempt that change a run's numbers when they change.
-RUNTIME_FIELDS: tuple[str, ...] = ("source", "torch", "compile", "device")
+RUNTIME_FIELDS: tuple[str, ...] = ("source", "torch", "demonstrations", "compile", "device")
 
 
 def source_fingerprint(package_dir: Path = PACKAGE_DIR) -> str:
@@ -51,17 +54,19 @@ def source_fingerprint(package_dir: Path = PACKAGE_DIR) -> str:
     return digest.hexdigest()[:12]
 
 
-def code_identity(compile: bool, device: str | torch.device) -> dict[str, Any]:
+def attempt_identity(demonstrations: str | None, compile: bool, device: str | torch.device) -> dict[str, Any]:
     """What an attempt trains under: the library's :func:`source_fingerprint`, torch's and
-    Python's versions, and whether it compiles, on which device.
+    Python's versions, the demonstration set's checksum (``demonstrations``, its first 12
+    hex digits are kept; ``None`` for none), and whether it compiles, on which device.
 
     Examples:
-        >>> identity = code_identity(compile=False, device="cpu")
-        >>> sorted(identity)
-        ['compile', 'device', 'python', 'source', 'torch']
+        >>> identity = attempt_identity("b34e70289b3df979", compile=False, device="cpu")
+        >>> sorted(identity), identity["demonstrations"]
+        (['compile', 'demonstrations', 'device', 'python', 'source', 'torch'], 'b34e70289b3d')
     """
     return {"source": source_fingerprint(), "torch": torch.__version__, "python": sys.version.split()[0],
-            "compile": bool(compile), "device": str(device)}
+            "demonstrations": None if demonstrations is None else demonstrations[:12], "compile": bool(compile),
+            "device": str(device)}
 
 
 def identity_changes(previous: Mapping[str, Any], current: Mapping[str, Any]) -> dict[str, tuple[Any, Any]]:
