@@ -32,6 +32,7 @@ from torchrl_causal.evaluation.tables import seed_effect_checks, seed_spread, se
 from torchrl_causal.report import main as report_main
 from torchrl_causal.status import main as status_main
 from torchrl_causal.status import run_statuses
+from torchrl_causal.trainers import RunDirectory
 
 # Appendix F, AntMaze-Medium column: raw E[Y] and success rate (%), deployment regime.
 PAPER_RAW = {
@@ -271,6 +272,17 @@ def test_archiving_again_replaces_a_runs_record_and_keeps_the_others(tmp_path_fa
     by_label = {r.label: r for r in load_runs(archive)}
     assert sorted(by_label) == ["bc", "c_bc"]
     assert by_label["c_bc"].evaluations["deploy"].success_rate == 1.0
+    # The run trained again from scratch: an evaluation only its earlier attempt made is not kept.
+    at_strength = RunDirectory(run).eval_path("deploy", "s0.5")
+    at_strength.write_text(eval_path(run, "deploy").read_text())
+    archive_runs(root, archive)
+    archived = archive / run.relative_to(root)
+    assert (archived / at_strength.relative_to(run)).is_file()
+    at_strength.unlink()
+    archive_runs(root, archive)
+    assert not (archived / at_strength.relative_to(run)).exists()
+    assert sorted(p.relative_to(archived) for p in archived.rglob("*") if p.is_file()) == sorted(
+        p.relative_to(run) for p in RunDirectory(run).record_files())
     with pytest.raises(ValueError, match="must not contain one another"):
         archive_runs(root, root / "archive")
     with pytest.raises(FileNotFoundError, match="does not exist"):

@@ -157,8 +157,10 @@ def archive_runs(root: str | Path, out: str | Path) -> list[Path]:
     the strength ablation's stored evaluations read back; at well under a megabyte per
     run it can be committed, so that a report is regenerated where the runs themselves
     (checkpoints, replay data) are gone. Archiving several machines' runs into one
-    ``out`` builds one table: an archived run's files are replaced by its newer record,
-    every other run already in ``out`` is kept. Evaluating at settings no record holds
+    ``out`` builds one table: an archived run's record is replaced as a whole by its newer
+    one (a file the newer run lacks, such as an evaluation at a setting it was not
+    evaluated at, belonged to an earlier run and is removed), every other run already in
+    ``out`` is kept. Evaluating at settings no record holds
     needs the original run directory (its ``checkpoints/best.pt``).
 
     Raises:
@@ -189,10 +191,14 @@ def archive_runs(root: str | Path, out: str | Path) -> list[Path]:
     archived = []
     for run in _complete_runs(root):
         target = out / run.path.relative_to(root)
-        for path in run.record_files():
-            destination = target / path.relative_to(run.path)
+        record = {path.relative_to(run.path) for path in run.record_files()}
+        for relative in sorted(record):
+            destination = target / relative
             destination.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(destination, path.read_text())
+            atomic_write_text(destination, (run.path / relative).read_text())
+        if target.is_dir():  # what only an earlier run of this directory recorded (its other evaluations)
+            for stale in [p for p in target.rglob("*") if p.is_file() and p.relative_to(target) not in record]:
+                stale.unlink()
         archived.append(target)
     return archived
 
