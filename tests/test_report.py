@@ -226,8 +226,16 @@ def test_status_lists_every_run_with_its_state(tmp_path: Path, capsys) -> None:
     stale = make_fake_run(tmp_path, "c_bc", deploy=(-100.0, 50.0), train=(-100.0, 50.0), status="running")
     (stale / ".hydra").mkdir()
     (stale / ".hydra" / "config.yaml").write_text("{}")
+    attempt = {"source": "a", "torch": "2.13.0", "demonstrations": "d1", "compile": True, "device": "cpu"}
+    RunDirectory(stale).record_attempt(attempt, progress=0)
+    RunDirectory(stale).record_attempt(attempt, progress=2)
+    RunDirectory(failed).record_attempt(attempt, progress=0)
+    RunDirectory(failed).record_attempt({**attempt, "python": "3.12"}, progress=1)  # not a field that changes numbers
+    RunDirectory(failed).record_attempt({**attempt, "demonstrations": "d2", "source": "b"}, progress=2)
     rows = {row["run"].split("/")[-2]: row for row in run_statuses(tmp_path)}
     assert sorted(rows) == ["c_bc", "c_sqil", "sqil"]
+    assert [rows[label]["attempts"] for label in ("c_sqil", "c_bc", "sqil")] == [
+        "—", "2", "3 (source, demonstrations changed)"]
     assert (rows["c_sqil"]["status"], rows["c_sqil"]["progress"], rows["c_sqil"]["deploy success %"]) == (
         "complete", "4 / 4 epochs (100%)", "90.0")
     assert rows["sqil"]["status"] == "failed: ValueError: bad" and rows["sqil"]["progress"] == "3 / 10 rounds (30%)"

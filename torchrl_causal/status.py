@@ -4,7 +4,9 @@ One row per run directory (a folder holding ``config.yaml``, below ``runs``): it
 (``running`` while a process holds its lock; ``killed`` when its file says running but no
 process does, i.e. the process died without recording its stop; ``interrupted``;
 ``failed``, with the error; ``complete``), its progress against its budget, the best
-train-regime evaluation return so far, and its final success rates once it has them. A
+train-regime evaluation return so far, its attempts (its start and each resume, from
+``code.json``) with the fields of code, data and runtime that changed between them, and its
+final success rates once it has them. A
 ``killed`` or ``interrupted`` run continues from its last checkpoint when its command is
 run again. Final success rates are shown for complete runs only: a run training again
 after its budget was raised still holds the evaluations of the earlier budget.
@@ -17,10 +19,12 @@ Examples:
     >>> run.path.mkdir(parents=True)
     >>> _ = run.config_file.write_text("seed: 0")
     >>> run.write_status("running", progress=50000, total=150000, unit="env steps", best_train_return=-91.5)
+    >>> _ = run.record_attempt({"source": "a", "compile": True}, progress=0)
+    >>> _ = run.record_attempt({"source": "b", "compile": True}, progress=40000)
     >>> print(status_markdown(run_statuses(root)))
-    | run | status | progress | best train return | train success % | deploy success % |
-    |---|---|---|---|---|---|
-    | rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0 | killed | 50000 / 150000 env steps (33%) | -91.5 | — | — |
+    | run | status | progress | attempts | best train return | train success % | deploy success % |
+    |---|---|---|---|---|---|---|
+    | rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0 | killed | 50000 / 150000 env steps (33%) | 2 (source changed) | -91.5 | — | — |
 """
 
 from __future__ import annotations
@@ -34,11 +38,12 @@ from typing import Any
 from omegaconf import OmegaConf
 
 from torchrl_causal.evaluation.metrics import EvaluationResult
+from torchrl_causal.trainers.provenance import RUNTIME_FIELDS, identity_changes
 from torchrl_causal.trainers.run_directory import CONFIG_FILE, RunDirectory
 
 __all__ = ["run_statuses", "status_markdown", "main"]
 
-COLUMNS = ("run", "status", "progress", "best train return", "train success %", "deploy success %")
+COLUMNS = ("run", "status", "progress", "attempts", "best train return", "train success %", "deploy success %")
 
 
 def _progress(status: dict[str, Any]) -> str:
@@ -49,6 +54,15 @@ def _progress(status: dict[str, Any]) -> str:
         return "no training"  # the expert: evaluated, not trained
     counted = f"{progress} / {total}" if total else f"{progress}"
     return counted + (f" {unit}" if unit else "") + (f" ({100 * progress / total:.0f}%)" if total else "")
+
+
+def _attempts(run: RunDirectory) -> str:
+    attempts = run.read_attempts()
+    if not attempts:
+        return "—"  # trained before attempts were recorded, or not started
+    changed = set().union(*(identity_changes(previous, current) for previous, current in zip(attempts, attempts[1:])))
+    named = [field for field in RUNTIME_FIELDS if field in changed]
+    return f"{len(attempts)}" + (f" ({', '.join(named)} changed)" if named else "")
 
 
 def _success(run: RunDirectory, regime: str) -> str:
@@ -80,8 +94,8 @@ def run_statuses(root: str | Path) -> list[dict[str, str]]:
         # a run training again after its budget was raised still holds the earlier budget's evaluations
         final = [_success(run, regime) if state == "complete" else "—" for regime in ("train", "deploy")]
         rows.append(dict(zip(COLUMNS, (
-            str(run.path.relative_to(root)) or ".", state, _progress(status), "—" if best is None else f"{best:.1f}",
-            *final,
+            str(run.path.relative_to(root)) or ".", state, _progress(status), _attempts(run),
+            "—" if best is None else f"{best:.1f}", *final,
         ))))
     return rows
 
