@@ -135,3 +135,15 @@ def test_gail_discriminator_passes_over_every_policy_row_each_epoch(tmp_path: Pa
         assert seen.shape[0] == rows
         assert all(torch.equal(a, b) for a, b in zip(seen.unique(dim=0, return_counts=True), first))
     assert not torch.equal(passes[0], passes[1])  # reshuffled between passes
+
+
+def test_bc_standardizes_its_input_by_the_training_demonstrations(tmp_path: Path) -> None:
+    cfg = tiny_config(tmp_path, "rovermaze_u", "bc", True, "algo.actor.standardize_observation=true")
+    trainer = build_trainer(cfg)
+    trainer.setup()
+    standardize = trainer.policy[0].module[0]
+    observations = trainer.train_data["observation"]
+    torch.testing.assert_close(standardize.loc, observations.mean(0))
+    torch.testing.assert_close(standardize.scale, observations.std(0))  # every window feature varies here
+    results = run(cfg)  # trains, checkpoints and evaluates through the restored statistics
+    assert results["deploy"].n_episodes == cfg.eval.final_episodes

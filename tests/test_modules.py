@@ -15,7 +15,9 @@ from torchrl_causal.modules import (
     ResidualBlock,
     ResidualMLP,
     SkipMLP,
+    Standardize,
     bounded_action_spec,
+    fit_standardizers,
     make_deterministic_actor,
     make_gail_discriminator,
     make_gail_value_network,
@@ -158,6 +160,38 @@ def test_deterministic_actor_is_tanh_of_the_network_scaled_to_bounds():
         expected = CENTER + HALF_RANGE * torch.tanh(body(td["observation"]))
         torch.testing.assert_close(actor(td.clone())["action"], expected)
     assert len(make_deterministic_actor(3, SPEC)[0].module.blocks) == 4  # paper's BC depth
+
+
+@settings(max_examples=25, deadline=None)
+@given(rows=st.integers(2, 40), features=st.integers(2, 6), seed=st.integers(0, 2**31 - 1))
+def test_standardize_gives_zero_mean_unit_deviation_on_its_fitting_data(rows, features, seed):
+    generator = torch.Generator().manual_seed(seed)
+    samples = torch.randn(rows, features, generator=generator, dtype=torch.float64) * 10.0 ** torch.arange(features) + 3
+    samples[:, 0] = 7.0  # a constant feature is centred, not divided by ~0
+    out = Standardize(features).double().fit(samples)(samples)
+    torch.testing.assert_close(out.mean(0), torch.zeros(features, dtype=torch.float64), atol=1e-9, rtol=0)
+    torch.testing.assert_close(out[:, 1:].std(0), torch.ones(features - 1, dtype=torch.float64))
+    assert (out[:, 0] == 0).all()
+
+
+def test_standardized_deterministic_actor_carries_its_statistics_in_its_state_dict():
+    plain = make_deterministic_actor(3, SPEC, hidden=16, num_blocks=1)
+    standardized = make_deterministic_actor(3, SPEC, hidden=16, num_blocks=1, standardize_observation=True)
+    assert not any(isinstance(m, Standardize) for m in plain.modules())
+    samples = torch.tensor([[0.0, 10.0, -1.0], [2.0, 30.0, -1.0], [4.0, 20.0, -1.0]])
+    assert fit_standardizers(standardized, samples) == 1 and fit_standardizers(plain, samples) == 0
+    standardize, network = standardized[0].module
+    torch.testing.assert_close(standardize.loc, torch.tensor([2.0, 20.0, -1.0]))
+    torch.testing.assert_close(standardize.scale, torch.tensor([2.0, 10.0, 1.0]))
+    restored = make_deterministic_actor(3, SPEC, hidden=16, num_blocks=1, standardize_observation=True)
+    restored.load_state_dict(standardized.state_dict())
+    td = TensorDict({"observation": samples}, [3])
+    with torch.no_grad():
+        torch.testing.assert_close(restored(td.clone())["action"], standardized(td.clone())["action"])
+        expected = CENTER + HALF_RANGE * torch.tanh(network((samples - standardize.loc) / standardize.scale))
+        torch.testing.assert_close(standardized(td.clone())["action"], expected)
+    with pytest.raises(ValueError, match=r"needs \(n >= 2, 3\) samples"):
+        standardize.fit(samples[:1])
 
 
 def test_qvalue_network_reads_observation_then_action():

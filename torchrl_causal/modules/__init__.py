@@ -8,13 +8,15 @@ from torchrl_causal.modules.factories import (
     make_qvalue_network,
     make_tanh_gaussian_actor,
 )
-from torchrl_causal.modules.networks import ResidualBlock, ResidualMLP, SkipMLP
+from torchrl_causal.modules.networks import ResidualBlock, ResidualMLP, SkipMLP, Standardize, fit_standardizers
 
 __all__ = [
     "ResidualBlock",
     "ResidualMLP",
     "SkipMLP",
+    "Standardize",
     "bounded_action_spec",
+    "fit_standardizers",
     "make_deterministic_actor",
     "make_gail_discriminator",
     "make_gail_value_network",

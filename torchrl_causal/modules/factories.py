@@ -24,7 +24,7 @@ from torch import nn
 from torchrl.data import Bounded, Composite, TensorSpec
 from torchrl.modules import MLP, ProbabilisticActor, TanhModule, TanhNormal, ValueOperator
 
-from torchrl_causal.modules.networks import ResidualMLP, SkipMLP
+from torchrl_causal.modules.networks import ResidualMLP, SkipMLP, Standardize
 
 __all__ = [
     "bounded_action_spec",
@@ -140,10 +140,15 @@ def make_deterministic_actor(
     hidden: int = 256,
     num_blocks: int = 4,
     dropout: float = 0.0,
+    standardize_observation: bool = False,
     observation_key: NestedKey = "observation",
     action_key: NestedKey = "action",
 ) -> TensorDictSequential:
     """Deterministic actor for Causal BC: residual MLP then tanh to the spec's bounds.
+
+    With ``standardize_observation`` a :class:`~torchrl_causal.modules.networks.Standardize`
+    comes first, the identity until :func:`~torchrl_causal.modules.networks.fit_standardizers`
+    fits it (the BC trainer does, on the training demonstrations).
 
     Examples:
         >>> import torch
@@ -156,6 +161,8 @@ def make_deterministic_actor(
     """
     spec = bounded_action_spec(action_spec, action_key)
     body = ResidualMLP(observation_dim, _action_dim(spec), hidden=hidden, num_blocks=num_blocks, dropout=dropout)
+    if standardize_observation:
+        body = nn.Sequential(Standardize(observation_dim), body)
     return TensorDictSequential(
         TensorDictModule(body, in_keys=[observation_key], out_keys=[action_key]),
         TanhModule(in_keys=[action_key], out_keys=[action_key], spec=spec),

@@ -13,7 +13,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-__all__ = ["ResidualBlock", "ResidualMLP", "SkipMLP"]
+__all__ = ["ResidualBlock", "ResidualMLP", "SkipMLP", "Standardize", "fit_standardizers"]
 
 
 def _check_positive(name: str, value: int) -> None:
@@ -47,6 +47,59 @@ def _project_parts(projection: nn.Linear, collapsed: list[torch.Tensor], batch_s
     parts = [nn.functional.linear(t, w) for t, w in zip(collapsed, weights)]
     out = sum(parts[1:], parts[0]) + projection.bias
     return out.expand(*batch_shape, out.shape[-1])
+
+
+class Standardize(nn.Module):
+    """Per-feature standardisation ``(x - loc) / scale`` with ``loc`` and ``scale`` fitted to data.
+
+    Not in the paper's architecture (Appendix E): an option for inputs whose features
+    differ in scale by orders of magnitude, such as AntMaze's window (positions in metres
+    up to ~20, hinge angles in radians, velocities). ``loc`` and ``scale``
+    are buffers, so they travel with the network's state dict (checkpoints); before
+    :meth:`fit` they are 0 and 1 and the module is the identity.
+
+    Args:
+        features (int): size of the last input dimension.
+
+    Examples:
+        >>> import torch
+        >>> standardize = Standardize(2)
+        >>> samples = torch.tensor([[0.0, 5.0], [10.0, 5.0]])
+        >>> standardize.fit(samples)(samples)  # the constant feature keeps scale 1
+        tensor([[-0.7071,  0.0000],
+                [ 0.7071,  0.0000]])
+    """
+
+    def __init__(self, features: int) -> None:
+        super().__init__()
+        _check_positive("features", features)
+        self.register_buffer("loc", torch.zeros(features))
+        self.register_buffer("scale", torch.ones(features))
+
+    @torch.no_grad()
+    def fit(self, samples: torch.Tensor, min_scale: float = 1e-6) -> Standardize:
+        """Sets ``loc`` and ``scale`` to the mean and standard deviation of ``samples``
+        (``(n, features)``, ``n >= 2``); a feature whose deviation is below ``min_scale``
+        keeps scale 1, so a constant input is centred, not blown up. Returns ``self``."""
+        if samples.ndim != 2 or samples.shape[-1] != self.loc.numel() or samples.shape[0] < 2:
+            raise ValueError(f"Standardize({self.loc.numel()}).fit needs (n >= 2, {self.loc.numel()}) samples, "
+                             f"got shape {tuple(samples.shape)}.")
+        samples = samples.to(self.loc)
+        deviation = samples.std(dim=0)
+        self.loc.copy_(samples.mean(dim=0))
+        self.scale.copy_(torch.where(deviation > min_scale, deviation, torch.ones_like(deviation)))
+        return self
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return (x - self.loc) / self.scale
+
+
+def fit_standardizers(module: nn.Module, samples: torch.Tensor) -> int:
+    """Fits every :class:`Standardize` inside ``module`` to ``samples``; returns how many."""
+    standardizers = [child for child in module.modules() if isinstance(child, Standardize)]
+    for standardize in standardizers:
+        standardize.fit(samples)
+    return len(standardizers)
 
 
 class ResidualBlock(nn.Module):

@@ -1,7 +1,8 @@
 """Behavioural cloning (Causal BC with a causal window), Appendix E's protocol.
 
 The demonstrations, encoded by the run's window, are split by episode into training and
-validation sets (``val_fraction`` of the episodes, 20% in the paper). Each epoch runs
+validation sets (``val_fraction`` of the episodes, 20% in the paper); an actor with
+``standardize_observation`` standardises its input by the training set's statistics. Each epoch runs
 Adam on the Huber loss over shuffled minibatches of ``batch_size`` (2048: large batches);
 training stops after ``patience`` epochs without a better validation loss or after
 ``epochs`` epochs. BC never acts during training; the base class still evaluates it in
@@ -19,6 +20,7 @@ from hydra.utils import instantiate
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
+from torchrl_causal.modules import fit_standardizers
 from torchrl_causal.trainers.base import Trainer
 from torchrl_causal.trainers.builders import expert_transitions, load_or_collect_demonstrations, make_imitator_env, make_policy
 
@@ -68,6 +70,7 @@ class BCTrainer(Trainer):
         env = make_imitator_env(self.cfg, self.window, "train", 1, self.cfg.seed)
         self.loss = instantiate(algo.loss)(make_policy(self.cfg, env).to(self.device))
         env.close()
+        fit_standardizers(self.policy, self.train_data["observation"])  # algo.actor.standardize_observation
         self.optimizer = instantiate(algo.optimizer)(self.loss.parameters())
         self.best_val_loss = math.inf
         self.epochs_without_improvement = 0

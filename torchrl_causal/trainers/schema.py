@@ -111,6 +111,13 @@ class ResidualMLPConfig(Target):
 
 
 @dataclass
+class BCActorConfig(ResidualMLPConfig):
+    """BC's deterministic actor (``make_deterministic_actor``), optionally standardising its input."""
+
+    standardize_observation: bool = False
+
+
+@dataclass
 class MLPConfig(Target):
     """A plain MLP factory (GAIL's value network)."""
 
@@ -295,7 +302,7 @@ class TrainedAlgoConfig(AlgoConfig):
 
 @dataclass
 class BCConfig(TrainedAlgoConfig):
-    actor: ResidualMLPConfig = MISSING
+    actor: BCActorConfig = MISSING
     loss: HuberBCLossConfig = MISSING
     optimizer: OptimizerConfig = MISSING
     batch_size: int = at_least()
