@@ -55,9 +55,9 @@ class Standardize(nn.Module):
     Not in the paper's architecture (Appendix E): an option for inputs whose features
     differ in scale by orders of magnitude, such as AntMaze's window (positions in metres
     up to ~20, hinge angles in radians, velocities); on AntMaze-Medium's C-BC it cost ~12
-    points of success (``results/antmaze_medium.md``), so it is off by default. ``loc`` and ``scale``
-    are buffers, so they travel with the network's state dict (checkpoints); before
-    :meth:`fit` they are 0 and 1 and the module is the identity.
+    points of success (``results/antmaze_medium.md``), so it is off by default. ``loc``
+    and ``scale`` are buffers, so they travel with the network's state dict (checkpoints);
+    before :meth:`fit` they are 0 and 1 and the module is the identity.
 
     Args:
         features (int): size of the last input dimension.

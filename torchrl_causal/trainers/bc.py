@@ -2,10 +2,10 @@
 
 The demonstrations, encoded by the run's window, are split by episode into training and
 validation sets (``val_fraction`` of the episodes, 20% in the paper); an actor with
-``standardize_observation`` standardises its input by the training set's statistics. Each epoch runs
-Adam on the Huber loss over shuffled minibatches of ``batch_size`` (2048: large batches);
-training stops after ``patience`` epochs without a better validation loss or after
-``epochs`` epochs. BC never acts during training; the base class still evaluates it in
+``standardize_observation`` standardises its input by the training set's statistics.
+Each epoch runs Adam on the Huber loss over shuffled minibatches of ``batch_size`` (2048:
+large batches); training stops after ``patience`` epochs without a better validation loss
+or after ``epochs`` epochs. BC never acts during training; the base class still evaluates it in
 the train regime every ``eval_every`` epochs and keeps the best checkpoint.
 """
 
