@@ -201,6 +201,19 @@ def test_notes_survive_regeneration_and_cli(paper_runs: Path, tmp_path: Path, ca
         write_report(tmp_path / "out", tmp_path / "elsewhere")
 
 
+def test_command_survives_regeneration_without_one(paper_runs: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    write_report(paper_runs, out, name="t", command="python -m torchrl_causal.train seed=0 &&\n  make report")
+    md = out / "t.md"
+    write_report(paper_runs, out, name="t")
+    assert "```bash\npython -m torchrl_causal.train seed=0 &&\n  make report\n```" in md.read_text()
+    write_report(paper_runs, out, name="t", command="make demo")
+    text = md.read_text()
+    assert "make demo" in text and "seed=0" not in text and text.count("Regenerate with:") == 1
+    write_report(paper_runs, tmp_path / "fresh", name="t")
+    assert "Regenerate with:" not in (tmp_path / "fresh" / "t.md").read_text()
+
+
 def test_corrupt_run_is_named(tmp_path: Path) -> None:
     run = make_fake_run(tmp_path, "bc", deploy=(-1.0, 1.0), train=(-1.0, 1.0), episodes=4)
     OmegaConf.save(OmegaConf.create({"env": {"name": "x"}}), run / "config.yaml")

@@ -4,7 +4,8 @@
 Writes the paper's Table 1 layout, the raw and episode-length tables and the effect
 checks as Markdown, the results CSV (one row per algorithm and regime) and PNG figures
 (training curves, maze trajectories, ablations when the runs hold them). ``command=...``
-records the command that regenerates the runs in the Markdown file; ``carried=<name>_all.csv``
+records the command that regenerates the runs in the Markdown file (without it, the file's
+earlier command is kept, as its notes are); ``carried=<name>_all.csv``
 keeps an earlier report's rows for the algorithms whose runs are not below ``runs``.
 """
 

@@ -26,7 +26,7 @@ from torchrl_causal.evaluation.tables import (
     write_csv,
 )
 
-__all__ = ["Report", "write_report", "kept_notes", "NOTES_BEGIN", "NOTES_END"]
+__all__ = ["Report", "write_report", "kept_command", "kept_notes", "NOTES_BEGIN", "NOTES_END"]
 
 # Hand-written analysis between these markers survives regeneration of the Markdown file.
 NOTES_BEGIN = "<!-- notes: kept when the report is regenerated -->"
@@ -73,6 +73,24 @@ def kept_notes(path: str | Path) -> str:
     return match.group(0) if match else ""
 
 
+def kept_command(path: str | Path) -> str | None:
+    """The command in the "Regenerate with" block of a results file written by
+    :func:`write_report`; ``None`` when the file or the block is absent.
+
+    Examples:
+        >>> import tempfile, pathlib
+        >>> md = pathlib.Path(tempfile.mkdtemp()) / "r.md"
+        >>> _ = md.write_text("# R\\n\\nRegenerate with:\\n\\n```bash\\nmake demo\\n```\\n")
+        >>> kept_command(md)
+        'make demo'
+    """
+    path = Path(path)
+    if not path.is_file():
+        return None
+    match = re.search(r"^Regenerate with:\n\n```bash\n(.*?)\n```", path.read_text(), flags=re.S | re.M)
+    return match.group(1) if match else None
+
+
 def _carry(aggregated: dict[Setting, dict], carried: str | Path) -> dict[Setting, list[str]]:
     """Adds to ``aggregated`` the rows of ``carried`` (an earlier ``_all.csv``) of the
     labels no run holds in their setting; returns the labels added, per setting."""
@@ -98,6 +116,9 @@ def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, na
     ``runs_root`` has its setting and label, and the Markdown names every carried row.
     The training curves, trajectories and across-seeds table come from the runs alone; the
     ablation plots, drawn from the tables, show carried rows too.
+
+    Without ``command`` the Markdown keeps the command its earlier version recorded (see
+    :func:`kept_command`), as it keeps the hand-written notes (:func:`kept_notes`).
     """
     runs = load_runs(runs_root)
     if not runs:
@@ -131,6 +152,7 @@ def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, na
     report.figures = [p for p in figures.values() if p is not None]
 
     lines = [f"# Results: {name}", ""]
+    command = command or kept_command(report.markdown)
     if command:
         lines += ["Regenerate with:", "", "```bash", command.strip(), "```", ""]
     notes = kept_notes(report.markdown)
