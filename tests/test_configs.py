@@ -220,6 +220,13 @@ def test_overrides_reach_env_window_and_run_dir() -> None:
     assert matched.window.window_matched and matched.run_name.split("/")[-2] == "sqil_wm"
     with pytest.raises(InterpolationResolutionError, match="non-causal baseline"):
         compose_config(["window=matched", "causal=true"]).run_name
+    no_action = compose_config(["window.drop=[X]"])
+    assert no_action.run_name == "rovermaze_medium/h1000-cs1.0-k10/c_sqil_no-X/seed0"
+    from torchrl_causal.trainers.builders import make_window
+
+    assert "X" in make_window(compose_config([])).lags and "X" not in make_window(no_action).lags
+    with pytest.raises(ValueError, match="cannot drop"):
+        make_window(compose_config(["window.drop=[compass]"]))
 
 
 @pytest.mark.parametrize(

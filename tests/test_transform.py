@@ -579,6 +579,33 @@ def test_include_current_false_keeps_only_past_steps():
     torch.testing.assert_close(transform.encode_trajectories(episode)["observation"], expected)
 
 
+def test_a_window_without_the_action_encodes_no_previous_action_and_hides_dropped_states():
+    window = AdjustmentWindow(k=2, action="X", lags={"P": (0, 1, 2), "V": (0, 1), "X": (1, 2)}, exact=True,
+                              witnesses=(), excluded=frozenset({"W"}), observed=("P", "V", "W", "X"))
+    no_action = window.without(["X"])
+    assert no_action.lags == {"P": (0, 1, 2), "V": (0, 1)} and no_action.excluded == {"W"}
+    assert not no_action.exact  # the smaller sets were not checked
+    no_speed = window.without(["V"])
+    assert no_speed.lags == {"P": (0, 1, 2), "X": (1, 2)} and no_speed.excluded == {"V", "W"}
+    assert window.without([]) is window
+    with pytest.raises(ValueError, match=r"cannot drop \['W'\]: not in the window"):
+        window.without(["W", "X"])
+    episode = TensorDict(
+        {"P": torch.tensor([[1.0], [2.0], [3.0]]), "V": torch.tensor([[5.0], [6.0], [7.0]]), "W": torch.zeros(3, 1),
+         "action": torch.tensor([[10.0], [20.0], [30.0]]),
+         "is_init": torch.tensor([[True], [False], [False]]),
+         "next": {"P": torch.tensor([[2.0], [3.0], [4.0]]), "V": torch.zeros(3, 1), "W": torch.zeros(3, 1)}},
+        batch_size=[3],
+    )
+    # columns: P_t, P_{t-1}, P_{t-2}, V_t, V_{t-1}: the full window's, its action columns cut
+    full = CausalWindowTransform(window).encode_trajectories(episode)["observation"]
+    encoded = CausalWindowTransform(no_action).encode_trajectories(episode)
+    torch.testing.assert_close(encoded["observation"], full[:, :5], rtol=0, atol=0)
+    assert "action" in encoded.keys()  # the action is still what the policy outputs
+    hidden = CausalWindowTransform(no_speed).encode_trajectories(episode)
+    assert "V" not in hidden.keys() and "W" not in hidden.keys()
+
+
 def test_causal_false_conditions_on_every_observed_variable_at_the_window_lags():
     window = AdjustmentWindow(
         k=2, action="X", lags={"P": (0, 1, 2), "X": (1, 2)}, excluded=frozenset({"W"}), exact=False,

@@ -106,7 +106,8 @@ def load_run(run_dir: str | Path) -> RunRecord:
     curve_file = run.train_curve_file
     return RunRecord(
         path=run.path,
-        label=run_label(cfg.algo.name, bool(cfg.causal), bool(OmegaConf.select(cfg, "window.window_matched"))),
+        label=run_label(cfg.algo.name, bool(cfg.causal), bool(OmegaConf.select(cfg, "window.window_matched")),
+                        OmegaConf.select(cfg, "window.drop", default=[])),
         setting=Setting(
             str(cfg.env.name), int(cfg.env.horizon), float(cfg.env.confounding_strength), int(cfg.window.k)
         ),

@@ -130,9 +130,12 @@ def display_name(label: str) -> str:
     """Column header of a run label.
 
     Examples:
-        >>> display_name("c_iq_learn"), display_name("sqil_wm")
-        ('C-IQ-Learn', 'SQIL (window-matched)')
+        >>> display_name("c_iq_learn"), display_name("sqil_wm"), display_name("c_bc_no-X")
+        ('C-IQ-Learn', 'SQIL (window-matched)', 'C-BC (no X)')
     """
+    label, _, dropped = label.partition("_no-")
+    if dropped:
+        return f"{display_name(label)} (no {', '.join(dropped.split('-'))})"
     if label.endswith("_wm") and label[:-3] in _DISPLAY:
         return f"{_DISPLAY[label[:-3]]} (window-matched)"
     return _DISPLAY.get(label, label)

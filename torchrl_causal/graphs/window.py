@@ -8,7 +8,7 @@ that a saved policy reloads with exactly the encoding it was trained on.
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Mapping
+from collections.abc import Hashable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -132,6 +132,34 @@ class AdjustmentWindow:
         if past == dict(self.lags):
             return self
         return replace(self, lags={var: lags for var, lags in past.items() if lags}, exact=False, witnesses=())
+
+    def without(self, variables: Iterable[str]) -> AdjustmentWindow:
+        """This window with ``variables`` left out at every lag (an ablation, not an adjustment).
+
+        Dropping the action removes the previous actions from the encoding: a history of
+        the demonstrator's own actions lets an imitator predict the next one by repeating
+        the last, a shortcut its own actions do not offer at rollout (the "copycat"
+        problem of Wen et al., NeurIPS 2020). Dropped state variables join
+        :attr:`excluded`. The smaller sets have not been checked against the sequential
+        pi-backdoor criterion, so the result has ``exact=False`` and no witnesses (an
+        empty ``variables`` returns the window unchanged).
+
+        Raises:
+            ValueError: if a variable is not in the window (:attr:`lags`).
+
+        Examples:
+            >>> w = AdjustmentWindow(k=2, action="X", lags={"P": (0, 1, 2), "X": (1, 2)})
+            >>> w.without(["X"]).lags
+            {'P': (0, 1, 2)}
+        """
+        dropped = set(variables)
+        if not dropped:
+            return self
+        missing = sorted(dropped - set(self.lags))
+        if missing:
+            raise ValueError(f"cannot drop {missing}: not in the window, whose variables are {list(self.lags)}")
+        return replace(self, lags={var: lags for var, lags in self.lags.items() if var not in dropped},
+                       excluded=self.excluded | (dropped - {self.action}), exact=False, witnesses=())
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-serialisable description; :meth:`from_dict` inverts it exactly."""

@@ -98,8 +98,9 @@ def make_window(cfg: DictConfig) -> AdjustmentWindow:
     """The adjustment window the imitator conditions on (``cfg.causal``, ``cfg.window``)."""
     env = make_env(cfg, "train", 1, cfg.seed)
     try:
-        return CausalWindowTransform.from_env(env, cfg.window.k, causal=cfg.causal, mode=WindowMode(cfg.window.mode).value,
-                                              window_matched=cfg.window.window_matched).window
+        window = CausalWindowTransform.from_env(env, cfg.window.k, causal=cfg.causal, mode=WindowMode(cfg.window.mode).value,
+                                                window_matched=cfg.window.window_matched).window
+        return window.without(cfg.window.drop)
     finally:
         env.close()
 

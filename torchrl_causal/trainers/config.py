@@ -34,7 +34,7 @@ CONFIG_NAME = "config"
 
 
 def register_resolvers() -> None:
-    """Registers ``${run_label:algo,causal,window_matched}`` and the schemas (idempotent)."""
+    """Registers ``${run_label:algo,causal,window_matched,drop}`` and the schemas (idempotent)."""
     if not OmegaConf.has_resolver("run_label"):
         OmegaConf.register_new_resolver("run_label", run_label)
     register_configs()

@@ -37,7 +37,7 @@ import math
 import os
 import shutil
 import socket
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -98,22 +98,24 @@ class RunInUseError(RuntimeError):
     """Another process is running this run directory."""
 
 
-def run_label(algorithm: str, causal: bool, window_matched: bool = False) -> str:
+def run_label(algorithm: str, causal: bool, window_matched: bool = False, drop: Sequence[str] = ()) -> str:
     """The algorithm's name in tables and run directories: ``c_sqil``, ``sqil``, ``expert``.
+
+    A window with variables dropped (``window.drop``, an ablation) ends in ``_no-`` and
+    their names, so that its runs never share a directory with the full window's.
 
     Examples:
         >>> run_label("iq_learn", True), run_label("bc", False), run_label("expert", False)
         ('c_iq_learn', 'bc', 'expert')
-        >>> run_label("sqil", False, window_matched=True)
-        'sqil_wm'
+        >>> run_label("sqil", False, window_matched=True), run_label("bc", True, drop=["X"])
+        ('sqil_wm', 'c_bc_no-X')
     """
     if algorithm == "expert":
         return "expert"
     if causal and window_matched:
         raise ValueError("window.window_matched=true is a non-causal baseline: use it with causal=false")
-    if causal:
-        return f"c_{algorithm}"
-    return f"{algorithm}_wm" if window_matched else algorithm
+    label = f"c_{algorithm}" if causal else f"{algorithm}_wm" if window_matched else algorithm
+    return f"{label}_no-{'-'.join(sorted(drop))}" if drop else label
 
 
 def _temporary(path: Path) -> Path:

@@ -262,6 +262,7 @@ class WindowConfig:
     k: int = at_least(0)
     mode: WindowMode = MISSING
     window_matched: bool = MISSING
+    drop: list[str] = field(default_factory=list)
 
 
 @dataclass
