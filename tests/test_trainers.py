@@ -130,6 +130,23 @@ def test_finished_run_is_not_retrained(trained_runs) -> None:
     assert (Path(cfg.run_dir) / "eval" / "deploy.json").stat().st_mtime_ns == before
 
 
+def test_a_run_made_before_an_option_existed_is_still_its_run(trained_runs) -> None:
+    cfg = tiny_config(trained_runs["route_choice"], "route_choice", "bc", True)
+    config_file = Path(cfg.run_dir) / "config.yaml"
+    stored = config_file.read_text()
+    before_drop = OmegaConf.load(config_file)
+    assert before_drop.window.pop("drop") == []
+    try:
+        OmegaConf.save(before_drop, config_file)  # as written before window.drop existed
+        assert run(cfg)["deploy"].n_episodes == 8
+        assert OmegaConf.load(config_file).window.drop == []  # the claim recorded the new key
+        with pytest.raises(ConfigMismatchError, match=r"window\.drop: \[\] -> \['X'\]"):
+            RunDirectory(cfg.run_dir).claim(tiny_config(trained_runs["route_choice"], "route_choice", "bc", True,
+                                                         "window.drop=[X]"))
+    finally:
+        config_file.write_text(stored)
+
+
 @pytest.mark.parametrize("change", ["env.make.maze=medium", "algo.optimizer.lr=0.01", "algo.actor.hidden=32",
                                     "window.mode=exact", "eval.final_episodes=9"])
 def test_a_changed_config_is_refused_naming_the_key(trained_runs, change: str) -> None:

@@ -169,14 +169,25 @@ def changed_keys(old: Mapping[str, Any], new: Mapping[str, Any], ignored: Iterab
     """``{key: (old value, new value)}`` for every leaf that differs, ``ignored`` keys aside
     (a key absent on one side shows as ``<absent>``).
 
+    A key absent on one side and empty on the other (``None``, ``[]``, ``{}``) is no change:
+    an option added to the configs later (``window.drop``, say) is empty exactly when it does
+    what its absence did, so run directories made before it existed stay resumable.
+
     Examples:
         >>> changed_keys({"algo": {"lr": 0.1, "n": 2}, "resume": True},
         ...              {"algo": {"lr": 0.2, "n": 2, "new": 1}, "resume": False})
         {'algo.lr': (0.1, 0.2), 'algo.new': ('<absent>', 1)}
+        >>> changed_keys({"window": {"k": 2}}, {"window": {"k": 2, "drop": []}})
+        {}
     """
     before, after = _identity(old, ignored), _identity(new, ignored)
-    return {key: (before.get(key, "<absent>"), after.get(key, "<absent>"))
-            for key in sorted(set(before) | set(after)) if before.get(key, "<absent>") != after.get(key, "<absent>")}
+    absent = "<absent>"
+
+    def same(a: Any, b: Any) -> bool:
+        return a == b or (a is absent and b in (None, [], {})) or (b is absent and a in (None, [], {}))
+
+    return {key: (before.get(key, absent), after.get(key, absent))
+            for key in sorted(set(before) | set(after)) if not same(before.get(key, absent), after.get(key, absent))}
 
 
 class RunDirectory:
