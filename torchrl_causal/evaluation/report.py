@@ -55,6 +55,13 @@ def _main_setting(runs: Sequence[RunRecord], carried: Mapping[Setting, Sequence[
     return max(counts, key=lambda s: (counts[s], s.strength, s.horizon, -s.k))
 
 
+def _search(path: str | Path, pattern: str) -> re.Match[str] | None:
+    """The first match of ``pattern`` (dot matches newlines, ``^`` each line) in a results file
+    written earlier; ``None`` when the file does not exist."""
+    path = Path(path)
+    return re.search(pattern, path.read_text(), flags=re.S | re.M) if path.is_file() else None
+
+
 def kept_notes(path: str | Path) -> str:
     """The hand-written notes block of a results file (``NOTES_BEGIN`` ... ``NOTES_END``,
     markers included) that its regeneration keeps; ``""`` when there is none.
@@ -66,10 +73,7 @@ def kept_notes(path: str | Path) -> str:
         >>> kept_notes(md).splitlines()[1]
         'Why.'
     """
-    path = Path(path)
-    if not path.is_file():
-        return ""
-    match = re.search(re.escape(NOTES_BEGIN) + r".*?" + re.escape(NOTES_END), path.read_text(), flags=re.S)
+    match = _search(path, re.escape(NOTES_BEGIN) + r".*?" + re.escape(NOTES_END))
     return match.group(0) if match else ""
 
 
@@ -84,10 +88,7 @@ def kept_command(path: str | Path) -> str | None:
         >>> kept_command(md)
         'make demo'
     """
-    path = Path(path)
-    if not path.is_file():
-        return None
-    match = re.search(r"^Regenerate with:\n\n```bash\n(.*?)\n```", path.read_text(), flags=re.S | re.M)
+    match = _search(path, r"^Regenerate with:\n\n```bash\n(.*?)\n```")
     return match.group(1) if match else None
 
 
