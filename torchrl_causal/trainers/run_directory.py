@@ -186,8 +186,8 @@ def changed_keys(old: Mapping[str, Any], new: Mapping[str, Any], ignored: Iterab
     def same(a: Any, b: Any) -> bool:
         return a == b or (a is absent and b in (None, [], {})) or (b is absent and a in (None, [], {}))
 
-    return {key: (before.get(key, absent), after.get(key, absent))
-            for key in sorted(set(before) | set(after)) if not same(before.get(key, absent), after.get(key, absent))}
+    pairs = {key: (before.get(key, absent), after.get(key, absent)) for key in sorted(set(before) | set(after))}
+    return {key: pair for key, pair in pairs.items() if not same(*pair)}
 
 
 class RunDirectory:
