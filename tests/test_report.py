@@ -28,7 +28,7 @@ from torchrl_causal.evaluation import (
 )
 from torchrl_causal.archive import main as archive_main
 from torchrl_causal.evaluation.runs import archive_runs, eval_path
-from torchrl_causal.evaluation.tables import seed_effect_checks, seed_spread, seeds_markdown
+from torchrl_causal.evaluation.tables import EffectTargets, seed_effect_checks, seed_spread, seeds_markdown
 from torchrl_causal.report import main as report_main
 from torchrl_causal.status import main as status_main
 from torchrl_causal.status import run_statuses
@@ -144,6 +144,30 @@ def test_effect_checks_on_the_paper_numbers(paper_runs: Path) -> None:
     assert [c.claim for c in failed] == ["SQIL deploy success <= 20% of the expert's"]
 
 
+def test_effect_targets_set_the_checks_thresholds(paper_runs: Path, tmp_path: Path) -> None:
+    (table,) = aggregate(load_runs(paper_runs)).values()
+    expert = table["expert"]["deploy"].success_rate
+    c_iq_fraction = table["c_iq_learn"]["deploy"].success_rate / expert  # the paper's 84.3 / 87.6 = 0.962
+    below, above = EffectTargets(causal_fraction=c_iq_fraction - 0.01), EffectTargets(causal_fraction=c_iq_fraction + 0.01)
+    claim = "C-IQ-Learn deploy success >= {:.0%} of the expert's"
+    assert {c.claim: c.passed for c in effect_checks(table, below)}[claim.format(c_iq_fraction - 0.01)]
+    assert not {c.claim: c.passed for c in effect_checks(table, above)}[claim.format(c_iq_fraction + 0.01)]
+    table["sqil"]["train"] = EvaluationResult("train", *_episodes(-110.0, 80.0, 100))  # 7 points below C-SQIL
+    gap_claim = "SQIL within {:g} points of C-SQIL (train regime)"
+    assert {c.claim: c.passed for c in effect_checks(table)}[gap_claim.format(10)]
+    assert not {c.claim: c.passed for c in effect_checks(table, EffectTargets(train_gap_points=5))}[gap_claim.format(5)]
+
+    out = tmp_path / "out"
+    report_main([f"runs={paper_runs}", f"out={out}", "name=t", "causal_fraction=0.9", "non_causal_fraction=0.1"])
+    text = (out / "t.md").read_text()
+    assert "C-SQIL deploy success >= 90% of the expert's" in text and "BC deploy success <= 10%" in text
+    with pytest.raises(SystemExit, match="causal_fraction=-0.5"):
+        report_main([f"runs={paper_runs}", f"out={out}", "causal_fraction=-0.5"])
+    for bad in (float("nan"), True, "0.9"):
+        with pytest.raises(ValueError, match="finite and >= 0"):
+            EffectTargets(non_causal_fraction=bad)
+
+
 def test_seeds_pool_and_ablation_plots(tmp_path: Path) -> None:
     for seed in (0, 1):
         make_fake_run(tmp_path, "c_sqil", seed=seed, deploy=(-100.0 - seed * 10, 80.0 + seed * 10),
@@ -179,9 +203,9 @@ def test_across_seeds_table_has_each_seed_and_the_seed_standard_error(tmp_path: 
     with pytest.raises(ValueError, match="at least one"):
         seed_spread([])
     make_fake_run(tmp_path, "expert", deploy=(-90.0, 100.0), train=(-90.0, 100.0), episodes=100)
-    (check,) = seed_effect_checks(load_runs(tmp_path), causal_fraction=0.85)
+    (check,) = seed_effect_checks(load_runs(tmp_path), EffectTargets(causal_fraction=0.85))
     assert (check.measured, check.passed) == ("seed 0: 80%, seed 1: 90%, seed 2: 100%", False)
-    assert seed_effect_checks(load_runs(tmp_path), causal_fraction=0.8)[0].passed
+    assert seed_effect_checks(load_runs(tmp_path), EffectTargets(causal_fraction=0.8))[0].passed
     report = write_report(tmp_path, tmp_path / "out")
     text = report.markdown.read_text()
     assert "### Across seeds" in text and "of the expert's in every seed" in text

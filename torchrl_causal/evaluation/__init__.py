@@ -13,6 +13,7 @@ from torchrl_causal.evaluation.runs import RunRecord, Setting, eval_path, load_r
 from torchrl_causal.evaluation.tables import (
     CSV_COLUMNS,
     TABLE1_ALGORITHMS,
+    EffectTargets,
     aggregate,
     effect_checks,
     normalised_returns,
@@ -20,6 +21,7 @@ from torchrl_causal.evaluation.tables import (
 
 __all__ = [
     "CSV_COLUMNS",
+    "EffectTargets",
     "EvaluationResult",
     "Report",
     "RunRecord",

@@ -38,6 +38,7 @@ __all__ = [
     "seed_spread",
     "seeds_markdown",
     "EffectCheck",
+    "EffectTargets",
     "effect_checks",
     "seed_effect_checks",
     "effect_markdown",
@@ -338,18 +339,47 @@ class EffectCheck:
     passed: bool
 
 
-def effect_checks(
-    table: Table,
-    *,
-    causal_fraction: float = 0.8,
-    non_causal_fraction: float = 0.2,
-    train_gap_points: float = 10.0,
-) -> list[EffectCheck]:
-    """The paper's effect as checks: causal off-policy methods keep ``causal_fraction`` of
-    the expert's deploy success, non-causal methods keep at most ``non_causal_fraction`` of
-    it, and in the train regime each non-causal method is within ``train_gap_points`` of
-    its causal counterpart. Checks whose runs are missing are skipped.
+@dataclass(frozen=True)
+class EffectTargets:
+    """The thresholds :func:`effect_checks` holds a table to.
+
+    Args:
+        causal_fraction: the least deploy success each causal off-policy method keeps, as a
+            fraction of the expert's (the paper's Table 1: 0.96-1.04 on AntMaze).
+        non_causal_fraction: the most deploy success a non-causal method keeps, as a fraction
+            of the expert's (the paper: 0 for all four).
+        train_gap_points: how many points of train-regime success a non-causal method may
+            lie from its causal twin.
+
+    Examples:
+        >>> EffectTargets(causal_fraction=0.9, non_causal_fraction=0.1)
+        EffectTargets(causal_fraction=0.9, non_causal_fraction=0.1, train_gap_points=10.0)
+        >>> EffectTargets(causal_fraction=-1)
+        Traceback (most recent call last):
+        ...
+        ValueError: EffectTargets' thresholds must be finite and >= 0, got causal_fraction=-1
     """
+
+    causal_fraction: float = 0.8
+    non_causal_fraction: float = 0.2
+    train_gap_points: float = 10.0
+
+    def __post_init__(self) -> None:
+        for name in ("causal_fraction", "non_causal_fraction", "train_gap_points"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"EffectTargets' thresholds must be finite and >= 0, got {name}={value!r}")
+
+
+def effect_checks(table: Table, targets: EffectTargets = EffectTargets()) -> list[EffectCheck]:
+    """The paper's effect as checks: causal off-policy methods keep ``targets.causal_fraction``
+    of the expert's deploy success, non-causal methods keep at most
+    ``targets.non_causal_fraction`` of it, and in the train regime each non-causal method is
+    within ``targets.train_gap_points`` of its causal counterpart. Checks whose runs are
+    missing are skipped.
+    """
+    causal_fraction, non_causal_fraction = targets.causal_fraction, targets.non_causal_fraction
+    train_gap_points = targets.train_gap_points
     checks: list[EffectCheck] = []
 
     def rate(label: str, regime: str) -> float | None:
@@ -386,10 +416,11 @@ def effect_checks(
     return checks
 
 
-def seed_effect_checks(runs: Iterable[RunRecord], *, causal_fraction: float = 0.8) -> list[EffectCheck]:
+def seed_effect_checks(runs: Iterable[RunRecord], targets: EffectTargets = EffectTargets()) -> list[EffectCheck]:
     """:func:`effect_checks`' causal claim seed by seed: each causal off-policy method keeps
-    ``causal_fraction`` of the expert's deploy success in every training seed (the expert
-    pooled over its runs, since it does not train). Skipped without an expert run."""
+    ``targets.causal_fraction`` of the expert's deploy success in every training seed (the
+    expert pooled over its runs, since it does not train). Skipped without an expert run."""
+    causal_fraction = targets.causal_fraction
     runs = list(runs)
     expert = [run.evaluations["deploy"] for run in runs if run.label == "expert" and "deploy" in run.evaluations]
     if not expert:
