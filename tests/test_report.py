@@ -394,3 +394,26 @@ def test_a_record_keeps_trajectory_positions_to_a_tenth_of_a_millimetre_and_ever
     assert record["trajectories"] == [[[0.1235, -2.0], [1.0001, 3.0]]]
     reloaded = EvaluationResult.from_dict(record)
     assert reloaded == result and reloaded.returns == (-1.23456789, -2.5)
+
+
+def test_a_report_reads_several_roots_and_refuses_a_run_held_twice(tmp_path: Path, capsys) -> None:
+    table1, seeds = tmp_path / "table1", tmp_path / "seeds"
+    make_fake_run(table1, "expert", deploy=(-100.0, 90.0), train=(-100.0, 90.0), episodes=100)
+    make_fake_run(table1, "c_sqil", seed=0, deploy=(-120.0, 60.0), train=(-120.0, 60.0), episodes=100)
+    make_fake_run(seeds, "c_sqil", seed=1, deploy=(-110.0, 80.0), train=(-110.0, 80.0), episodes=100)
+    pooled = aggregate(load_runs([table1, seeds]))
+    (table,) = pooled.values()
+    assert table["c_sqil"]["deploy"].success_rate == pytest.approx(0.7)  # (60 + 80) / 200 episodes
+    assert sorted(set(table["c_sqil"]["deploy"].seeds)) == [0, 1]
+
+    out = tmp_path / "out"
+    report_main([f"runs=[{table1},{seeds}]", f"out={out}", "name=t"])
+    assert "### Across seeds" in (out / "t.md").read_text()
+
+    make_fake_run(seeds, "c_sqil", seed=0, deploy=(-300.0, 10.0), train=(-300.0, 10.0), episodes=100)
+    with pytest.raises(ValueError, match="both c_sqil seed 0 .* would pool them as two seeds"):
+        load_runs([table1, seeds])
+    with pytest.raises(ValueError, match="would pool them as two seeds"):
+        load_runs(tmp_path)  # a folder above both roots holds seed 0 twice
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        load_runs([table1, tmp_path / "missing"])

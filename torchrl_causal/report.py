@@ -1,4 +1,4 @@
-"""Report of a folder of runs:
+"""Report of a folder of runs, or of several (``runs=[<dir>,<dir>]``, each run held by one):
 ``python -m torchrl_causal.report runs=<dir> [out=<dir>] [name=<str>] [command=<str>] [carried=<csv>]
 [causal_fraction=<x>] [non_causal_fraction=<x>] [train_gap_points=<x>]``.
 
@@ -26,7 +26,7 @@ from torchrl_causal.evaluation.tables import EffectTargets
 def main(argv: Sequence[str] | None = None) -> None:
     args = OmegaConf.from_cli(list(sys.argv[1:] if argv is None else argv))
     target_keys = ("causal_fraction", "non_causal_fraction", "train_gap_points")
-    usage = "runs=<dir> [out=<dir>] [name=<str>] [command=<str>] [carried=<csv>] " + " ".join(
+    usage = "runs=<dir>|[<dir>,...] [out=<dir>] [name=<str>] [command=<str>] [carried=<csv>] " + " ".join(
         f"[{key}=<x>]" for key in target_keys)
     unknown = set(args) - {"runs", "out", "name", "command", "carried", *target_keys}
     if unknown:
@@ -37,7 +37,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         targets = EffectTargets(**{key: args[key] for key in target_keys if key in args})
     except ValueError as error:
         raise SystemExit(str(error)) from error
-    report = write_report(args.runs, args.get("out"), name=args.get("name"), command=args.get("command"),
+    runs = list(args.runs) if OmegaConf.is_list(args.runs) else args.runs
+    report = write_report(runs, args.get("out"), name=args.get("name"), command=args.get("command"),
                           carried=args.get("carried"), targets=targets)
     print(report.markdown.read_text())
     print(f"wrote {report.markdown}, {report.csv}, {report.all_csv}" + "".join(f", {p}" for p in report.figures))

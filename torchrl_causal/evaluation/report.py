@@ -104,10 +104,11 @@ def _carry(aggregated: dict[Setting, dict], carried: str | Path) -> dict[Setting
     return {setting: labels for setting, labels in added.items() if labels}
 
 
-def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, name: str | None = None,
+def write_report(runs_root: str | Path | Sequence[str | Path], out_dir: str | Path | None = None, *, name: str | None = None,
                  command: str | None = None, carried: str | Path | None = None,
                  targets: EffectTargets = EffectTargets()) -> Report:
-    """Reads every run below ``runs_root`` and writes ``<out_dir>/<name>.{md,csv}``,
+    """Reads every run below ``runs_root`` (a folder, or several: see
+    :func:`~torchrl_causal.evaluation.runs.load_runs`) and writes ``<out_dir>/<name>.{md,csv}``,
     ``<name>_all.csv`` (every setting, with setting columns) and the PNG figures.
 
     ``<name>.csv`` holds the main setting (the most runs, a carried row counting as one) with
@@ -126,10 +127,12 @@ def write_report(runs_root: str | Path, out_dir: str | Path | None = None, *, na
     Without ``command`` the Markdown keeps the command its earlier version recorded (see
     :func:`kept_command`), as it keeps the hand-written notes (:func:`kept_notes`).
     """
-    runs = load_runs(runs_root)
+    roots = [Path(runs_root)] if isinstance(runs_root, (str, Path)) else [Path(root) for root in runs_root]
+    runs = load_runs(roots)
     if not runs:
-        raise FileNotFoundError(f"no evaluated runs below {runs_root} (expected */config.yaml with eval/*.json)")
-    out_dir = Path(out_dir) if out_dir is not None else Path(runs_root) / "report"
+        raise FileNotFoundError(f"no evaluated runs below {', '.join(map(str, roots))} "
+                                "(expected */config.yaml with eval/*.json)")
+    out_dir = Path(out_dir) if out_dir is not None else roots[0] / "report"
     out_dir.mkdir(parents=True, exist_ok=True)
     envs = sorted({run.setting.env for run in runs})
     name = name or (envs[0] if len(envs) == 1 else "report")

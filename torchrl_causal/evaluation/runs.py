@@ -119,18 +119,38 @@ def load_run(run_dir: str | Path) -> RunRecord:
     )
 
 
-def load_runs(root: str | Path) -> list[RunRecord]:
-    """Every complete run below ``root`` with at least one final evaluation, in path order.
+def load_runs(roots: str | Path | Iterable[str | Path]) -> list[RunRecord]:
+    """Every complete run below ``roots`` (one folder or several) with at least one final
+    evaluation, in path order.
 
     A run directory whose final evaluations are there but whose status is not
     ``"complete"`` is left out, with a warning naming it: its budget was raised and it is
     training again (or that attempt stopped), so its evaluations belong to the earlier
     budget and would be reported as the new one's.
+
+    Two runs of the same label, setting and seed are refused with a ``ValueError`` naming
+    both: a report would pool them as two seeds. They come from a folder above two run
+    roots (``runs/`` holding a Table-1 root and an ablation's, say) or from two roots that
+    both hold the run; point the report at the roots that hold each run once.
     """
-    root = Path(root)
-    if not root.exists():
-        raise FileNotFoundError(f"runs folder {root} does not exist")
-    return [load_run(run.path) for run in _complete_runs(root)]
+    folders = [Path(roots)] if isinstance(roots, (str, Path)) else [Path(root) for root in roots]
+    if not folders:
+        raise ValueError("load_runs needs at least one runs folder")
+    records: list[RunRecord] = []
+    first_path: dict[tuple[Setting, str, int], Path] = {}
+    for folder in folders:
+        if not folder.exists():
+            raise FileNotFoundError(f"runs folder {folder} does not exist")
+        for run in _complete_runs(folder):
+            record = load_run(run.path)
+            key = (record.setting, record.label, record.seed)
+            if key in first_path:
+                raise ValueError(f"{first_path[key]} and {record.path} are both {record.label} seed {record.seed} "
+                                 f"on {record.setting.describe()}: a report would pool them as two seeds; "
+                                 "point runs= at the run roots that hold each run once")
+            first_path[key] = record.path
+            records.append(record)
+    return records
 
 
 def _complete_runs(root: Path) -> Iterator[RunDirectory]:
