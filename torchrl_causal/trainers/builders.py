@@ -147,7 +147,8 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
     The set must have been recorded in this config's train-regime env (same maze,
     horizon, strength): :func:`~torchrl_causal.data.load_demonstrations` refuses others.
     Collection is atomic, so runs started side by side may both collect; one identical
-    set wins and the other run loads it.
+    set wins and the other run loads it. Collection leaves torch's random state as it
+    found it, so a run that collects the set trains exactly as one that loads it.
     """
     from torchrl_causal.data import collect_demonstrations, load_demonstrations
 
@@ -156,9 +157,12 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
     if not path.exists():
         episodes = cfg.demos.episodes
         env = make_env(cfg, "train", min(episodes, 64), cfg.demos.seed)
+        # The expert seeds itself from the global generator: without the fork, whether this
+        # run or another collected the set would change every later draw of the training.
         try:
-            collect_demonstrations(env, make_expert(cfg, env), episodes, path, seed=cfg.demos.seed,
-                                   progress=cfg.progress_bar)
+            with torch.random.fork_rng():
+                collect_demonstrations(env, make_expert(cfg, env), episodes, path, seed=cfg.demos.seed,
+                                       progress=cfg.progress_bar)
         except OSError:
             if not path.exists():
                 raise
