@@ -287,6 +287,15 @@ def _assert_same_state(a, b, where: str = "") -> None:
         assert a == b, where
 
 
+def _last_checkpoints(*configs) -> list[dict]:
+    """Each run's last checkpoint without the collector's state: trajectory ids are
+    renumbered on load, and nothing reads them."""
+    states = [load_checkpoint(Path(cfg.run_dir) / "checkpoints" / "last.pt") for cfg in configs]
+    for state in states:
+        state["training"].pop("collector", None)
+    return states
+
+
 EXACT = {"sqil": ("algo.total_steps=320", "algo.eval_every=160"), "gail": ("algo.rounds=3", "algo.eval_every=2"),
          "bc": ("algo.epochs=4", "algo.patience=10")}
 
@@ -308,11 +317,7 @@ def test_interrupt_at_a_random_step_then_resume_equals_an_uninterrupted_run(tmp_
     assert run_dir.read_status()["status"] == "interrupted"
     assert not run_dir.eval_path("deploy").exists()
     results_b = run(tiny_config(tmp_path / "b", "rovermaze_u", algo, True, *extra))
-    a, b = (load_checkpoint(Path(cfg.run_dir) / "checkpoints" / "last.pt") for cfg in (straight, interrupted))
-    for part in ("collector",):  # trajectory ids are renumbered on load; nothing reads them
-        for state in (a, b):
-            state["training"].pop(part, None)
-    _assert_same_state(a, b)
+    _assert_same_state(*_last_checkpoints(straight, interrupted))
     _assert_same_state(*(load_checkpoint(Path(cfg.run_dir) / "checkpoints" / "best.pt") for cfg in (straight, interrupted)))
     assert results_a["deploy"].returns == results_b["deploy"].returns
     curves = [read_scalar_csv(Path(cfg.run_dir) / "logs/scalars/eval/train_return.csv") for cfg in (straight, interrupted)]
@@ -337,10 +342,7 @@ def test_a_run_that_collects_its_demonstrations_equals_one_that_loads_them(tmp_p
     loads = tiny_config(tmp_path / "b", "rovermaze_u", algo, True, *EXACT[algo], f"demos.path={collects.demos.path}")
     results_b = run(loads)
     assert not (tmp_path / "b" / "_demos").exists()
-    a, b = (load_checkpoint(Path(cfg.run_dir) / "checkpoints" / "last.pt") for cfg in (collects, loads))
-    for state in (a, b):
-        state["training"].pop("collector", None)  # trajectory ids only
-    _assert_same_state(a, b)
+    _assert_same_state(*_last_checkpoints(collects, loads))
     assert results_a["deploy"].returns == results_b["deploy"].returns
 
 
