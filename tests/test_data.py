@@ -12,7 +12,13 @@ import pytest
 import torch
 from tensordict import MemoryMappedTensor, TensorDict
 
-from torchrl_causal.data import DatasetError, collect_demonstrations, load_demonstrations, read_metadata
+from torchrl_causal.data import (
+    DatasetError,
+    collect_demonstrations,
+    load_demonstrations,
+    read_metadata,
+    successful_episodes,
+)
 from torchrl_causal.envs import RouteChoiceEnv, RoverExpert, RoverMazeEnv
 
 EPISODES = 12
@@ -167,3 +173,30 @@ def test_interrupted_collection_leaves_nothing(tmp_path, monkeypatch):
     with pytest.raises(OSError, match="disk full"):
         collect_demonstrations(RouteChoiceEnv(batch_size=(4,)), lambda td: td.set("action", td["Z"]), 4, tmp_path / "demos", progress=False)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_successful_episodes_keeps_whole_successful_episodes_only(tmp_path):
+    # The rover expert needs 188-201 steps on this maze: a 198-step horizon truncates some episodes.
+    env = RoverMazeEnv(maze="u", batch_size=(EPISODES,), horizon=198)
+    data = collect_demonstrations(env, RoverExpert(env, seed=0), EPISODES, tmp_path / "u", progress=False)
+    ends = data["next", "done"].reshape(-1)
+    outcome = dict(zip(data["episode"][ends].tolist(), data["next", "success"].reshape(-1)[ends].tolist()))
+    assert 0 < sum(outcome.values()) < EPISODES
+
+    kept = successful_episodes(data)
+    expected = [episode for episode, success in outcome.items() if success]
+    assert kept["episode"].unique().tolist() == expected
+    assert kept.shape[0] == sum(int((data["episode"] == episode).sum()) for episode in expected)
+    # whole episodes: each starts at is_init and ends at its goal-reaching step
+    assert int(kept["is_init"].sum()) == len(expected) == int(kept["next", "success"].sum())
+    assert kept["next", "done"].reshape(-1)[-1]
+
+
+def test_successful_episodes_refuses_a_set_without_success(dataset):
+    data = load_demonstrations(dataset)
+    with pytest.raises(DatasetError, match="no .'next', 'success'. key"):
+        successful_episodes(data.exclude(("next", "success")))
+    failed = data.clone()
+    failed.set(("next", "success"), torch.zeros_like(failed["next", "success"]))
+    with pytest.raises(DatasetError, match=f"no episode of the {EPISODES}"):
+        successful_episodes(failed)

@@ -450,3 +450,27 @@ def test_evaluate_cli_writes_its_own_record(trained_runs, torch_threads) -> None
     assert c_sqil.evaluations["deploy"].n_episodes == 8 and len(c_sqil.evaluations["deploy"].trajectories) == 2
     with pytest.raises(SystemExit, match="unknown argument"):
         evaluate_main([f"run_dir={root}", "episodez=3"])
+
+
+def test_successful_only_trains_on_the_successful_episodes_of_the_same_set(tmp_path: Path) -> None:
+    from torchrl_causal.trainers.builders import load_or_collect_demonstrations
+
+    # A 198-step horizon truncates some of the rover expert's 188-201-step episodes.
+    every = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "env.horizon=198", "demos.episodes=12")
+    successful = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "env.horizon=198", "demos.episodes=12",
+                             "demos.successful_only=true")
+    assert successful.demos.path == every.demos.path  # one set on disk, selected at load
+    all_episodes = load_or_collect_demonstrations(every)
+    kept = load_or_collect_demonstrations(successful)
+    ends = all_episodes["next", "done"].reshape(-1)
+    succeeded = all_episodes["episode"][ends & all_episodes["next", "success"].reshape(-1)]
+    assert 0 < succeeded.numel() < 12
+    assert kept["episode"].unique().tolist() == succeeded.tolist()
+    assert trainer_sees(successful) == kept.shape[0] < trainer_sees(every) == all_episodes.shape[0]
+
+
+def trainer_sees(cfg) -> int:
+    """How many expert transitions the off-policy trainer of ``cfg`` loads into its expert buffer."""
+    trainer = build_trainer(cfg)
+    trainer.setup()
+    return len(trainer.expert_buffer)

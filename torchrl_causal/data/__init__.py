@@ -6,6 +6,8 @@ from torchrl_causal.data.demonstrations import (
     collect_demonstrations,
     load_demonstrations,
     read_metadata,
+    successful_episodes,
 )
 
-__all__ = ["FORMAT_VERSION", "DatasetError", "collect_demonstrations", "load_demonstrations", "read_metadata"]
+__all__ = ["FORMAT_VERSION", "DatasetError", "collect_demonstrations", "load_demonstrations", "read_metadata",
+           "successful_episodes"]

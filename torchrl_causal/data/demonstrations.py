@@ -41,6 +41,7 @@ __all__ = [
     "collect_demonstrations",
     "load_demonstrations",
     "read_metadata",
+    "successful_episodes",
 ]
 
 FORMAT_VERSION = 1
@@ -88,7 +89,11 @@ def _rollout_episodes(
 
     Returns the completed episodes, each a ``[T]`` TensorDict, in order of completion
     (ties broken by batch index); episodes still running at the end are dropped so that
-    no truncated-by-collection episode enters the dataset.
+    no truncated-by-collection episode enters the dataset. Completion order favours short
+    episodes: when ``episodes`` is a few times the batch size, long ones (on goal-terminated
+    tasks, the failures) are under-represented, so the stored success rate is the set's,
+    not the policy's (Confounded AntMaze-Medium: 98.5% in 200 episodes from 64 envs,
+    against the expert's 87%).
     """
     if env.batch_size == ():
         raise ValueError("collect_demonstrations needs a batched env (batch_size (B,) or larger)")
@@ -298,3 +303,41 @@ def load_demonstrations(
     if expected is not None:
         _check_expected(metadata, expected, "")
     return data
+
+
+def successful_episodes(data: TensorDictBase) -> TensorDictBase:
+    """The episodes of a dataset whose last transition reached the goal (``("next", "success")``).
+
+    Imitation losses that label every expert transition alike (SQIL's reward 1, IQ-Learn's
+    expert occupancy) also imitate the expert's failures: on Confounded AntMaze those are
+    flips, hundreds of steps of an upside-down ant per failed episode. Keeping whole
+    successful episodes leaves ``"is_init"`` and ``"episode"`` valid.
+
+    Args:
+        data: a dataset of shape ``[N]`` as :func:`load_demonstrations` returns it.
+
+    Returns:
+        A new TensorDict with the transitions of the successful episodes, in their order.
+
+    Raises:
+        DatasetError: the dataset has no ``("next", "success")`` key, or no episode succeeded.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> episode = torch.tensor([0, 0, 1, 1, 1, 2])
+        >>> data = TensorDict({"episode": episode,
+        ...                    "next": {"success": torch.tensor([[False], [True], [False], [False], [False], [True]])}},
+        ...                   batch_size=[6])
+        >>> successful_episodes(data)["episode"].tolist()
+        [0, 0, 2]
+    """
+    if ("next", "success") not in data.keys(True):
+        raise DatasetError("cannot select successful episodes: the dataset has no ('next', 'success') key")
+    episode = data.get("episode")
+    success = data.get(("next", "success")).reshape(-1)
+    # An episode ends at success, so any successful step marks its episode as successful.
+    succeeded = torch.zeros(int(episode.max()) + 1, dtype=torch.bool).index_put_((episode,), success, accumulate=True)
+    keep = succeeded[episode]
+    if not keep.any():
+        raise DatasetError(f"no episode of the {int(episode.unique().numel())} in the dataset reached the goal")
+    return data[keep].to_tensordict()

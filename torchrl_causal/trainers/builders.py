@@ -142,7 +142,8 @@ def make_expert(cfg: DictConfig, env: EnvBase) -> Callable[[TensorDictBase], Ten
 
 def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
     """Loads the demonstration set at ``cfg.demos.path``, collecting it with the expert first
-    if it does not exist yet (train regime, ``cfg.demos.episodes`` episodes).
+    if it does not exist yet (train regime, ``cfg.demos.episodes`` episodes); with
+    ``cfg.demos.successful_only`` only its episodes that reached the goal are returned.
 
     The set must have been recorded in this config's train-regime env (same maze,
     horizon, strength): :func:`~torchrl_causal.data.load_demonstrations` refuses others.
@@ -150,7 +151,7 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
     set wins and the other run loads it. Collection leaves torch's random state as it
     found it, so a run that collects the set trains exactly as one that loads it.
     """
-    from torchrl_causal.data import collect_demonstrations, load_demonstrations
+    from torchrl_causal.data import collect_demonstrations, load_demonstrations, successful_episodes
 
     path = Path(cfg.demos.path)
     reference = make_env(cfg, "train", 1, cfg.demos.seed)
@@ -169,7 +170,8 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
             # Another run finished collecting the same set first (rename onto its folder failed).
         finally:
             env.close()
-    return load_demonstrations(path, expected=reference)
+    demonstrations = load_demonstrations(path, expected=reference)
+    return successful_episodes(demonstrations) if cfg.demos.successful_only else demonstrations
 
 
 def expert_transitions(window: AdjustmentWindow, demonstrations: TensorDictBase) -> TensorDict:

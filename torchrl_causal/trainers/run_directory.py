@@ -169,22 +169,29 @@ def changed_keys(old: Mapping[str, Any], new: Mapping[str, Any], ignored: Iterab
     """``{key: (old value, new value)}`` for every leaf that differs, ``ignored`` keys aside
     (a key absent on one side shows as ``<absent>``).
 
-    A key absent on one side and empty on the other (``None``, ``[]``, ``{}``) is no change:
-    an option added to the configs later (``window.drop``, say) is empty exactly when it does
-    what its absence did, so run directories made before it existed stay resumable.
+    A key absent on one side and off on the other (``None``, ``[]``, ``{}``, ``False``) is no
+    change: an option added to the configs later (``window.drop``, ``demos.successful_only``)
+    is off exactly when it does what its absence did, so run directories made before it
+    existed stay resumable.
 
     Examples:
         >>> changed_keys({"algo": {"lr": 0.1, "n": 2}, "resume": True},
         ...              {"algo": {"lr": 0.2, "n": 2, "new": 1}, "resume": False})
         {'algo.lr': (0.1, 0.2), 'algo.new': ('<absent>', 1)}
-        >>> changed_keys({"window": {"k": 2}}, {"window": {"k": 2, "drop": []}})
+        >>> changed_keys({"window": {"k": 2}}, {"window": {"k": 2, "drop": []}, "demos": {"successful_only": False}})
         {}
+        >>> changed_keys({"seed": 0}, {"seed": 0, "demos": {"successful_only": True}, "n": 0})
+        {'demos.successful_only': ('<absent>', True), 'n': ('<absent>', 0)}
     """
     before, after = _identity(old, ignored), _identity(new, ignored)
     absent = "<absent>"
 
+    def off(value: Any) -> bool:
+        # `is False`: 0 == False, and a new numeric key set to 0 is a change
+        return value is None or value is False or (isinstance(value, (list, dict)) and not value)
+
     def same(a: Any, b: Any) -> bool:
-        return a == b or (a is absent and b in (None, [], {})) or (b is absent and a in (None, [], {}))
+        return a == b or (a is absent and off(b)) or (b is absent and off(a))
 
     pairs = {key: (before.get(key, absent), after.get(key, absent)) for key in sorted(set(before) | set(after))}
     return {key: pair for key, pair in pairs.items() if not same(*pair)}

@@ -278,6 +278,7 @@ class DemosConfig:
     episodes: int = at_least()
     seed: int = at_least(0)
     path: str = MISSING
+    successful_only: bool = MISSING
 
 
 @dataclass
