@@ -452,7 +452,7 @@ def test_evaluate_cli_writes_its_own_record(trained_runs, torch_threads) -> None
         evaluate_main([f"run_dir={root}", "episodez=3"])
 
 
-def test_successful_only_trains_on_the_successful_episodes_of_the_same_set(tmp_path: Path) -> None:
+def test_successful_only_trains_on_the_successful_episodes_of_the_same_set(tmp_path: Path, caplog) -> None:
     from torchrl_causal.trainers.builders import load_or_collect_demonstrations
 
     # A 198-step horizon truncates some of the rover expert's 188-201-step episodes.
@@ -461,11 +461,13 @@ def test_successful_only_trains_on_the_successful_episodes_of_the_same_set(tmp_p
                              "demos.successful_only=true")
     assert successful.demos.path == every.demos.path  # one set on disk, selected at load
     all_episodes = load_or_collect_demonstrations(every)
-    kept = load_or_collect_demonstrations(successful)
+    with caplog.at_level("INFO"):
+        kept = load_or_collect_demonstrations(successful)
     ends = all_episodes["next", "done"].reshape(-1)
     succeeded = all_episodes["episode"][ends & all_episodes["next", "success"].reshape(-1)]
     assert 0 < succeeded.numel() < 12
     assert kept["episode"].unique().tolist() == succeeded.tolist()
+    assert f"{succeeded.numel()} of 12 demonstration episodes reached the goal" in caplog.text
     assert trainer_sees(successful) == kept.shape[0] < trainer_sees(every) == all_episodes.shape[0]
 
 

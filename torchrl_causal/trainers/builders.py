@@ -8,6 +8,7 @@ evaluation envs) and the offline demonstrations, so train and test inputs agree.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -37,6 +38,8 @@ __all__ = [
     "observation_dim",
     "TRANSITION_KEYS",
 ]
+
+log = logging.getLogger(__name__)
 
 # What the IL losses read from a replay batch (the cross-team contract), plus the flag.
 TRANSITION_KEYS: tuple = (
@@ -171,7 +174,12 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
         finally:
             env.close()
     demonstrations = load_demonstrations(path, expected=reference)
-    return successful_episodes(demonstrations) if cfg.demos.successful_only else demonstrations
+    if not cfg.demos.successful_only:
+        return demonstrations
+    kept = successful_episodes(demonstrations)
+    log.info("demos.successful_only: %d of %d demonstration episodes reached the goal (%d of %d transitions kept)",
+             int(kept["is_init"].sum()), int(demonstrations["is_init"].sum()), kept.shape[0], demonstrations.shape[0])
+    return kept
 
 
 def expert_transitions(window: AdjustmentWindow, demonstrations: TensorDictBase) -> TensorDict:
