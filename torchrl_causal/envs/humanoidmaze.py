@@ -1,12 +1,26 @@
-"""Confounded HumanoidMaze (the paper's Section 4 / Appendix D) on a 21-DoF MuJoCo humanoid.
+"""Confounded HumanoidMaze (the paper's Section 4 / Appendix D) on OGBench's humanoid.
 
-The paper's dimensions (21 joint angles, 27 joint velocities, 21 torques, 12-dim
-extremities, head height, torso vertical, centre-of-mass velocity) are those of
-DeepMind's humanoid (dm_control / OGBench's HumanoidMaze), not of gymnasium's 17-actuator
-``Humanoid``. That MJCF ships with TorchRL (``torchrl/envs/custom/mujoco/assets/
-humanoid.xml``, Apache-2.0, DeepMind's model), so we build the maze around it with the same
-gymnasium-robotics builder as the ant. Control is 40 Hz: 5 physics steps of 0.005 s, as in
-dm_control's humanoid.
+The agent is OGBench's own model (:data:`~torchrl_causal.envs.humanoid.HUMANOID_XML`: DeepMind's
+dm_control humanoid, 21 motors, 40 Hz control of 5 x 0.005 s physics steps) compiled unchanged
+into the gymnasium-robotics maze that the ant uses (4 m cells, walls 2 m high: the same boxes
+as OGBench's ``humanoidmaze-{medium,large}-navigate``, whose frame is this one mirrored in
+``y`` and shifted). Our batched simulator steps it; ``tests/test_humanoid.py`` checks it step
+for step against OGBench's own env.
+
+The reward is the maze suite's ``1{success} - |U_t| (1 + d_t / 25)`` per step, the ant's,
+with the tremor process of the ant's wind (5% of 5-step windows, ``|U| ~ U[2, 5]``). Fitted to
+the paper's raw E[Y] (its Appendix F), summed over H = 2000 steps:
+
+* a policy that never leaves the start (d = 28.3 m on Medium, 43.3 m on Large) scores
+  ``-2000 * 0.05 * 3.5 * (1 + d / 25)`` = -745.9 on Medium (paper, the 0%-success GAIL and
+  C-GAIL: -747.7 and -747.2) and -955.9 on Large (paper: -977.0 and -976.3, about one
+  standard error from it at 100 evaluation episodes); the spread across episodes this gives,
+  168 and 215, is the paper's ±162.5 and ±208.9;
+* the paper's expert (33.8% success in 976 ± 410 steps, E[Y] = -522.9) then implies failed
+  episodes ending on average 22 m from the goal: the humanoid falls part-way.
+
+The previous docstring's ``-1`` per step minus ``0.1 |U|`` would give -2035 for a failure,
+which no row of the paper is near.
 """
 
 from __future__ import annotations
@@ -17,8 +31,16 @@ from typing import TYPE_CHECKING, ClassVar
 
 import mujoco
 import numpy as np
-import torchrl
+import torch
 
+from torchrl_causal.envs.humanoid import (
+    HUMANOID_COLUMNS,
+    HUMANOID_FRAME_SKIP,
+    HUMANOID_STATE_WIDTH,
+    HUMANOID_XML,
+    HumanoidReadout,
+    standing_qpos,
+)
 from torchrl_causal.envs.mujoco_maze import MazeTask, MujocoMazeEnv
 from torchrl_causal.envs.templates import HUMANOIDMAZE_TEMPLATE
 
@@ -27,46 +49,35 @@ if TYPE_CHECKING:
 
 __all__ = ["HumanoidMazeEnv"]
 
-_NQ, _NV = 28, 27  # free joint (7 / 6) + 21 hinges
-#: extremities in dm_control's order (its ``Humanoid.extremities`` observation).
-_EXTREMITIES = ("hand_left", "foot_left", "hand_right", "foot_right")
-# State buffer: qpos (28) | qvel (27) | head height (1) | extremities (12) | torso vertical (3) | CoM velocity (3)
-_HEAD, _EXTREMITY, _VERTICAL, _COM = _NQ + _NV, _NQ + _NV + 1, _NQ + _NV + 13, _NQ + _NV + 16
-
-#: Collision bits: the humanoid's geoms (contype 2, conaffinity 1) touch the floor and the
-#: maze walls (contype 1, conaffinity 1) but not each other.
-_BODY_CONTYPE, _BODY_CONAFFINITY = 2, 1
-
 
 class HumanoidMazeEnv(MujocoMazeEnv):
-    """Confounded HumanoidMaze: a humanoid in a maze shaken by seismic tremors.
+    """Confounded HumanoidMaze: OGBench's humanoid in a maze shaken by seismic tremors.
 
-    Variables (keys, dims): ``"P"`` torso ground-plane position (2), ``"A"`` hinge angles
-    (21), ``"H"`` head height (1), ``"E"`` hands and feet relative to the torso in the
-    torso frame (12, order left hand, left foot, right hand, right foot), ``"V"`` torso
-    vertical (3: the world z-axis in the torso frame, dm_control's
-    ``torso_vertical_orientation``), ``("latent", "C")`` centre-of-mass velocity (3,
-    hidden from the imitator), ``"J"`` generalised velocities (27: free joint then
-    hinges), ``"W"`` vibration sensor (2), ``"action"`` = X, the 21 torques in
-    ``[-1, 1]``. The imitator's V^O is 68 state dims plus the previous action: 89.
+    Variables (keys, dims), OGBench's humanoid observation split as the paper's Appendix D:
+    ``"P"`` torso ground-plane position (2), ``"A"`` hinge angles (21), ``"H"`` head height
+    (1), ``"E"`` hands and feet relative to the torso in the torso frame (12, order left hand,
+    left foot, right hand, right foot), ``"V"`` torso vertical (3: the world z-axis in the
+    torso frame), ``("latent", "C")`` centre-of-mass velocity (3, hidden from the imitator),
+    ``"J"`` generalised velocities (27: free joint then hinges), ``"W"`` vibration sensor
+    (2), ``"action"`` = X, the 21 torques in ``[-1, 1]``. The imitator's V^O is 68 state dims
+    plus the previous action: 89.
 
-    Mechanism: the tremor U (``("scm", "U")``, the maze suite's gust process) pushes the torso
-    with its force in newtons (the humanoid weighs 40.8 kg, so tremors disturb it far
+    Mechanism: the tremor U (``("scm", "U")``, the maze suite's gust process) pushes the
+    torso with its force in newtons (the humanoid weighs 40.8 kg, so tremors disturb it far
     less than the wind disturbs the 0.91 kg ant, as the paper reports); the vibration
-    reading is ``tanh(0.9 C_xy + 0.1 tremor direction + N(0, 0.05²))`` (C_xy is the
-    ground-plane centre-of-mass velocity in m/s), rotated by ``confounding_strength * pi``
-    in the deployment regime; the reward is ``-1`` per step minus
-    ``0.1 * |U|`` (the episode ends at success).
+    reading is ``tanh(0.9 C_xy + 0.1 tremor direction + N(0, 0.05²))`` (C_xy the ground-plane
+    centre-of-mass velocity in m/s), rotated by ``confounding_strength * pi`` in the
+    deployment regime; the reward is ``1{success} - |U_t| (1 + d_t / 25)`` with ``d_t`` the
+    distance to the goal in metres (fitted to the paper's raw E[Y]: see the module docstring).
 
-    Model edits (documented deviations from TorchRL's MJX-tuned MJCF, which only lets the
-    feet touch the floor): every body geom collides with the floor and the maze walls
-    (else the humanoid would walk through walls), none with another body geom.
-
-    Tasks: the ant's cells (medium (1, 1) → (6, 6), large (1, 1) → (7, 10)); the start
-    is the standing pose at the cell centre plus uniform position noise of a quarter cell
-    and uniform noise of 0.01 on the other coordinates (gymnasium's Humanoid); success
-    within 0.45 m ends the episode; horizon 2000. A fallen humanoid does not end the
-    episode (as in OGBench's HumanoidMaze).
+    Tasks: the ant's cells (medium (1, 1) → (6, 6), large (1, 1) → (7, 10): OGBench's
+    ``task1``). The start is standing (:func:`~torchrl_causal.envs.humanoid.standing_qpos`)
+    facing a uniform random direction at the start cell's centre plus uniform noise of a
+    quarter cell per axis (OGBench's ±1 m), with uniform noise of 0.01 on the other
+    coordinates and N(0, 0.01²) velocities. This is the one deviation from OGBench, whose
+    humanoid starts dropped from 1.5 m in a random orientation, so lying down: our expert
+    is a walking skill, not a get-up skill. Success within 0.45 m (OGBench: 0.5 m, as for
+    the ant) ends the episode; horizon 2000. A fallen humanoid does not end the episode.
 
     Examples:
         >>> env = HumanoidMazeEnv("medium", batch_size=2, seed=0)
@@ -75,18 +86,10 @@ class HumanoidMazeEnv(MujocoMazeEnv):
         (torch.Size([2, 3, 12]), torch.Size([2, 3, 3]), torch.Size([2, 3, 21]))
     """
 
-    agent_xml: ClassVar[pathlib.Path] = pathlib.Path(torchrl.__file__).parent / "envs/custom/mujoco/assets/humanoid.xml"
-    frame_skip: ClassVar[int] = 5
-    variable_columns: ClassVar[Mapping[str, slice]] = {
-        "P": slice(0, 2),
-        "A": slice(7, _NQ),
-        "H": slice(_HEAD, _HEAD + 1),
-        "E": slice(_EXTREMITY, _EXTREMITY + 12),
-        "V": slice(_VERTICAL, _VERTICAL + 3),
-        "C": slice(_COM, _COM + 3),
-        "J": slice(_NQ, _NQ + _NV),
-    }
-    state_width: ClassVar[int] = _COM + 3
+    agent_xml: ClassVar[pathlib.Path] = HUMANOID_XML
+    frame_skip: ClassVar[int] = HUMANOID_FRAME_SKIP
+    variable_columns: ClassVar[Mapping[str, slice]] = HUMANOID_COLUMNS
+    state_width: ClassVar[int] = HUMANOID_STATE_WIDTH
     latent_variables: ClassVar[tuple[str, ...]] = ("C",)
     tasks: ClassVar[Mapping[str, MazeTask]] = {
         "medium": MazeTask("medium", start_cell=(1, 1), goal_cell=(6, 6)),
@@ -101,33 +104,16 @@ class HumanoidMazeEnv(MujocoMazeEnv):
         """The paper's slice graph (:data:`~torchrl_causal.envs.templates.HUMANOIDMAZE_TEMPLATE`)."""
         return HUMANOIDMAZE_TEMPLATE
 
-    @classmethod
-    def _edit_spec(cls, spec: mujoco.MjSpec) -> None:
-        for pair in list(spec.pairs):  # the feet-only floor contacts, superseded below
-            spec.delete(pair)
-        for geom in spec.geoms:
-            if geom.parent.name != "world":
-                geom.contype, geom.conaffinity = _BODY_CONTYPE, _BODY_CONAFFINITY
-
     def _bind_model(self, model: mujoco.MjModel) -> None:
-        self._head_id = model.body("head").id
-        self._extremity_ids = [model.body(name).id for name in _EXTREMITIES]
+        self._readout = HumanoidReadout(model)
+
+    def _reference_qpos(self, count: int) -> np.ndarray:
+        yaw = 2 * np.pi * torch.rand(count, generator=self.rng, dtype=torch.float64).numpy()
+        # Lifted by the height noise, so that no start has the feet in the floor.
+        return standing_qpos(self.simulator.model, yaw, clearance=self.qpos_noise)
 
     def _read_state(self, data: mujoco.MjData, row: np.ndarray) -> None:
-        model, torso = self.simulator.model, self.simulator.torso_id
-        # mj_step leaves positions-dependent quantities one substep behind qpos; recompute
-        # them (and the subtree velocities) so that every variable describes the same state.
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)
-        mujoco.mj_comVel(model, data)
-        mujoco.mj_subtreeVel(model, data)
-        row[:_NQ] = data.qpos
-        row[_NQ:_HEAD] = data.qvel
-        row[_HEAD] = data.xpos[self._head_id, 2]
-        frame = data.xmat[torso].reshape(3, 3)
-        row[_EXTREMITY:_VERTICAL] = ((data.xpos[self._extremity_ids] - data.xpos[torso]) @ frame).ravel()
-        row[_VERTICAL:_COM] = frame[2]
-        row[_COM:] = data.subtree_linvel[torso]
+        self._readout.read(data, row)
 
     def _sensor_signal(self, state: np.ndarray) -> np.ndarray:
-        return state[:, _COM : _COM + 2]
+        return state[:, HUMANOID_COLUMNS["C"]][:, :2]

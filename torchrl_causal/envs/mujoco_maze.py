@@ -423,6 +423,24 @@ class MujocoMazeEnv(GustConfoundedEnv):
         would cost more than the rest of the SCM layer.
         """
 
+    def _start_state(self, count: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(qpos, qvel)`` of ``count`` fresh episodes, drawn from the env's generator.
+
+        By default ``qpos0`` plus uniform noise of :attr:`qpos_noise`, the torso's ground-plane
+        position at the start cell's centre plus uniform noise of :attr:`start_noise` cells,
+        and Gaussian ``qvel`` of :attr:`qvel_noise_std`.
+        """
+        model = self.simulator.model
+        uniform = torch.rand((count, model.nq + 2), generator=self.rng, dtype=torch.float64).numpy() * 2 - 1
+        gaussian = torch.randn((count, model.nv), generator=self.rng, dtype=torch.float64).numpy()
+        qpos = self._reference_qpos(count) + self.qpos_noise * uniform[:, : model.nq]
+        qpos[:, :2] = self._start_xy + self.start_noise * MAZE_SIZE_SCALING * uniform[:, -2:]
+        return qpos, self.qvel_noise_std * gaussian
+
+    def _reference_qpos(self, count: int) -> np.ndarray:
+        """The ``(count, nq)`` poses that :meth:`_start_state` adds noise to: ``qpos0`` by default."""
+        return np.tile(self.simulator.model.qpos0, (count, 1))
+
     # -- ConfoundedEnv hooks -------------------------------------------------------------
 
     def _make_variable_specs(self) -> tuple[TensorSpec, Mapping[NestedKey, TensorSpec]]:
@@ -442,13 +460,7 @@ class MujocoMazeEnv(GustConfoundedEnv):
         indices = np.flatnonzero(mask.reshape(-1).cpu().numpy())
         if indices.size == 0:
             return
-        model = self.simulator.model
-        uniform = torch.rand((indices.size, model.nq + 2), generator=self.rng, dtype=torch.float64).numpy() * 2 - 1
-        gaussian = torch.randn((indices.size, model.nv), generator=self.rng, dtype=torch.float64).numpy()
-        qpos = model.qpos0 + self.qpos_noise * uniform[:, : model.nq]
-        qpos[:, :2] = self._start_xy + self.start_noise * MAZE_SIZE_SCALING * uniform[:, -2:]
-        qvel = self.qvel_noise_std * gaussian
-        self.simulator.reset(indices, qpos, qvel)
+        self.simulator.reset(indices, *self._start_state(indices.size))
         for index in indices:
             self._read_state(self.simulator.datas[index], self._state[index])
 

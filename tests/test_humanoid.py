@@ -1,0 +1,114 @@
+"""The paper's humanoid: our HumanoidMaze against OGBench's own ``humanoidmaze`` env.
+
+The reference is the installed ``ogbench`` package's env (env only: no dataset is read), built
+by its own maze factory around its own ``humanoid.xml``. OGBench lays its maze out in another
+frame (cell ``(i, j)`` at ``(4 j - 4, 4 i - 4)``; gymnasium-robotics': ``y`` mirrored and
+centred), so the trajectory checks put both humanoids at the same world point, 2.5 m from every
+wall of both mazes: contact dynamics are chaotic, and the rounding of positions translated by
+a few metres alone drifts a random-action trajectory apart by 1e-3 within 200 steps.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from torchrl_causal.envs import GustProcess, HumanoidMazeEnv
+from torchrl_causal.envs.humanoid import HUMANOID_COLUMNS
+
+ogbench = pytest.importorskip("ogbench")
+
+#: A world point 2.5 m from every wall of OGBench's medium maze and of ours.
+CLEAR_POINT = np.array([1.5, 2.0])
+STEPS = 300
+
+
+def _ogbench_medium():
+    env = ogbench.make_env_and_datasets("humanoidmaze-medium-navigate-v0", env_only=True)
+    return env.unwrapped
+
+
+def _ours(seed: int = 0) -> HumanoidMazeEnv:
+    env = HumanoidMazeEnv("medium", batch_size=1, seed=seed)
+    env.gust_process = GustProcess(probability=0.0)  # no tremor: OGBench has none
+    return env
+
+
+def _ogbench_observation(ours: dict[str, torch.Tensor]) -> torch.Tensor:
+    """Our variables in the order of OGBench's ``HumanoidEnv.get_ob`` (69 dims)."""
+    keys = ("P", "A", "H", "E", "V", ("latent", "C"), "J")
+    return torch.cat([ours[key] for key in keys], dim=-1)
+
+
+def test_our_model_is_ogbench_humanoid_in_ogbench_maze():
+    reference, ours = _ogbench_medium().model, _ours().simulator.model
+    for option in ("timestep", "integrator", "iterations", "tolerance", "cone", "solver", "jacobian"):
+        assert getattr(ours.opt, option) == getattr(reference.opt, option), option
+    assert ours.opt.timestep == 0.005 and ours.opt.iterations == 100
+    for field in ("jnt_range", "jnt_stiffness", "dof_damping", "dof_armature", "actuator_gear", "actuator_ctrlrange",
+                  "body_mass", "body_inertia", "body_pos", "body_quat", "qpos0"):
+        np.testing.assert_array_equal(getattr(ours, field), getattr(reference, field), err_msg=field)
+    # The humanoid's geoms (contact, friction, shape) are OGBench's, then come the walls.
+    def body_geoms(model):
+        ids = np.flatnonzero(model.geom_bodyid > 0)
+        return {field: getattr(model, field)[ids] for field in
+                ("geom_size", "geom_pos", "geom_contype", "geom_conaffinity", "geom_condim", "geom_friction",
+                 "geom_solref", "geom_solimp")}
+    for field, value in body_geoms(reference).items():
+        np.testing.assert_array_equal(body_geoms(ours)[field], value, err_msg=field)
+    # Walls: the same boxes (4 m cells, 2 m high, default contact) in OGBench's frame.
+    rows, cols = 8, 8
+    def walls(model, to_ogbench):
+        boxes = []
+        for geom in range(model.ngeom):
+            if model.geom(geom).name.startswith("block_"):
+                x, y, z = model.geom_pos[geom]
+                boxes.append((*to_ogbench(x, y), z, *model.geom_size[geom], *model.geom_solref[geom],
+                              *model.geom_friction[geom], model.geom_contype[geom], model.geom_conaffinity[geom]))
+        return sorted(np.round(boxes, 9).tolist())
+    ours_in_ogbench_frame = walls(ours, lambda x, y: (x + 2 * cols - 6, 2 * rows - 6 - y))
+    assert ours_in_ogbench_frame == walls(reference, lambda x, y: (x, y))
+    assert len(ours_in_ogbench_frame) == sum(map(sum, HumanoidMazeEnv.tasks["medium"].maze_map))
+
+
+def _start_from(reference, ours: HumanoidMazeEnv, qpos: np.ndarray, qvel: np.ndarray):
+    """Puts both humanoids in state ``(qpos, qvel)`` at :data:`CLEAR_POINT`; our reset tensordict."""
+    qpos = qpos.copy()
+    qpos[:2] = CLEAR_POINT
+    reference.set_state(qpos, qvel)
+    td = ours.reset()
+    ours.simulator.reset(np.array([0]), qpos[None], qvel[None])  # the variables are read after each step
+    return td
+
+
+def _wall_contacts(model, data) -> int:
+    names = [model.geom(data.contact.geom[k, i]).name for k in range(data.ncon) for i in range(2)]
+    return sum(name.startswith("block_") for name in names)
+
+
+@pytest.mark.parametrize("start", ["ogbench_reset", "our_standing_start"])
+def test_trajectories_match_ogbench_step_for_step(start):
+    reference, ours = _ogbench_medium(), _ours(seed=3)
+    if start == "ogbench_reset":  # OGBench's own start: dropped from 1.5 m, random orientation and joints
+        reference.reset(seed=3, options={"task_id": 1})
+        qpos, qvel = reference.data.qpos.copy(), reference.data.qvel.copy()
+    else:
+        ours.reset()
+        qpos, qvel = ours.simulator.qpos()[0], ours.simulator.qvel()[0]
+    td = _start_from(reference, ours, qpos, qvel)
+    generator = torch.Generator().manual_seed(7)
+    for step in range(STEPS):
+        action = 2 * torch.rand(1, 21, generator=generator) - 1
+        observation, *_ = reference.step(action[0].double().numpy())
+        td["action"] = action
+        td = ours.step(td)["next"]
+        data = ours.simulator.datas[0]
+        # the float64 physics state: the same to rounding after hundreds of contact-rich steps
+        gap = max(np.abs(data.qpos - reference.data.qpos).max(), np.abs(data.qvel - reference.data.qvel).max())
+        assert gap < 1e-9, (step, gap)
+        # what the env emits (float32) is OGBench's observation
+        torch.testing.assert_close(_ogbench_observation(td)[0], torch.as_tensor(observation, dtype=torch.float32),
+                                   rtol=1e-5, atol=1e-4)
+        assert _wall_contacts(reference.model, reference.data) == 0 and _wall_contacts(ours.simulator.model, data) == 0
+    assert reference.data.ncon > 0  # it was on the floor, not in free flight
