@@ -38,6 +38,10 @@ from torchrl_causal.progress import progress as progress_reporter
 __all__ = [
     "FORMAT_VERSION",
     "DatasetError",
+    "check_expected",
+    "check_manifest",
+    "dataset_checksum",
+    "env_config",
     "collect_demonstrations",
     "load_demonstrations",
     "read_metadata",
@@ -65,7 +69,8 @@ def _manifest(data: TensorDictBase) -> dict[str, dict[str, Any]]:
     return {name: {"shape": list(value.shape), "dtype": str(value.dtype)} for name, value in _leaves(data)}
 
 
-def _checksum(data: TensorDictBase, metadata: Mapping[str, Any]) -> str:
+def dataset_checksum(data: TensorDictBase, metadata: Mapping[str, Any]) -> str:
+    """SHA-256 over ``metadata`` (its ``"checksum"`` field aside) and every leaf of ``data``, by key."""
     digest = hashlib.sha256()
     digest.update(json.dumps({k: v for k, v in metadata.items() if k != "checksum"}, sort_keys=True).encode())
     for name, value in _leaves(data):
@@ -74,7 +79,8 @@ def _checksum(data: TensorDictBase, metadata: Mapping[str, Any]) -> str:
     return digest.hexdigest()
 
 
-def _env_config(env: EnvBase) -> dict[str, Any]:
+def env_config(env: EnvBase) -> dict[str, Any]:
+    """What a dataset records of the env it was collected in (``env.config()`` where the env has one)."""
     config = getattr(env, "config", None)
     if callable(config):
         return config()
@@ -174,7 +180,7 @@ def collect_demonstrations(
     success = data.get(("next", "success"))[last_steps] if ("next", "success") in data.keys(True) else None
     metadata: dict[str, Any] = {
         "format_version": FORMAT_VERSION,
-        "env": _env_config(env),
+        "env": env_config(env),
         "regime": getattr(env, "regime", None),
         "seed": seed,
         "policy": f"{type(policy).__module__}.{type(policy).__qualname__}",
@@ -184,7 +190,7 @@ def collect_demonstrations(
         "mean_episode_length": data.shape[0] / episodes,
         "manifest": _manifest(data),
     }
-    metadata["checksum"] = _checksum(data, metadata)
+    metadata["checksum"] = dataset_checksum(data, metadata)
     _write_atomically(data, metadata, path, overwrite)
     return load_demonstrations(path)
 
@@ -241,7 +247,20 @@ def _check_file_sizes(path: Path, manifest: Mapping[str, Mapping[str, Any]]) -> 
             )
 
 
-def _check_expected(actual: Any, expected: Any, where: str) -> None:
+def check_manifest(data: TensorDictBase, manifest: Mapping[str, Mapping[str, Any]], path: str | os.PathLike) -> None:
+    """Refuses ``data`` unless its keys, shapes and dtypes are exactly the ``manifest``'s."""
+    found = _manifest(data)
+    for name, entry in manifest.items():
+        if name not in found:
+            raise DatasetError(f"dataset {path} is missing key {name!r}")
+        if found[name] != entry:
+            raise DatasetError(f"dataset {path} key {name!r} is {found[name]}, the manifest records {entry}")
+    if extra := sorted(set(found) - set(manifest)):
+        raise DatasetError(f"dataset {path} has keys absent from its manifest: {extra}")
+
+
+def check_expected(actual: Any, expected: Any, where: str) -> None:
+    """Refuses metadata ``actual`` unless every field of ``expected`` (nested) has its value."""
     if isinstance(expected, Mapping):
         if not isinstance(actual, Mapping):
             raise DatasetError(f"dataset metadata {where or 'root'} is {actual!r}, expected a mapping")
@@ -249,7 +268,7 @@ def _check_expected(actual: Any, expected: Any, where: str) -> None:
             name = f"{where}.{field}" if where else str(field)
             if field not in actual:
                 raise DatasetError(f"dataset metadata has no field {name!r} (expected {value!r})")
-            _check_expected(actual[field], value, name)
+            check_expected(actual[field], value, name)
     elif actual != expected:
         raise DatasetError(f"dataset metadata field {where!r} is {actual!r}, expected {expected!r}")
 
@@ -288,20 +307,13 @@ def load_demonstrations(
         data = TensorDict.load_memmap(path / _DATA_DIR)
     except Exception as error:  # tensordict raises a variety of errors on truncated or missing files
         raise DatasetError(f"dataset {path} cannot be read (truncated or missing file?): {error}") from error
-    found = _manifest(data)
-    for name, entry in manifest.items():
-        if name not in found:
-            raise DatasetError(f"dataset {path} is missing key {name!r}")
-        if found[name] != entry:
-            raise DatasetError(f"dataset {path} key {name!r} is {found[name]}, the manifest records {entry}")
-    if extra := sorted(set(found) - set(manifest)):
-        raise DatasetError(f"dataset {path} has keys absent from its manifest: {extra}")
-    if verify_checksum and _checksum(data, metadata) != metadata.get("checksum"):
+    check_manifest(data, manifest, path)
+    if verify_checksum and dataset_checksum(data, metadata) != metadata.get("checksum"):
         raise DatasetError(f"dataset {path} fails its checksum: its data or metadata were modified")
     if isinstance(expected, EnvBase):
-        expected = {"env": {k: v for k, v in _env_config(expected).items() if k != "batch_size"}}
+        expected = {"env": {k: v for k, v in env_config(expected).items() if k != "batch_size"}}
     if expected is not None:
-        _check_expected(metadata, expected, "")
+        check_expected(metadata, expected, "")
     return data
 
 
