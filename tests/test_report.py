@@ -196,9 +196,12 @@ def test_across_seeds_table_has_each_seed_and_the_seed_standard_error(tmp_path: 
     make_fake_run(tmp_path, "sqil", seed=0, deploy=(-300.0, 0.0), train=(-90.0, 95.0), episodes=100)
     table = seeds_markdown(load_runs(tmp_path))
     c_sqil = next(line for line in table.splitlines() if line.startswith("| C-SQIL"))
-    # deploy: mean 90, sample std 10, SE 10 / sqrt(3) = 5.77
-    assert c_sqil == "| C-SQIL | 0: 90.0, 1: 90.0, 2: 90.0 | 90.0 ± 0.0 | 0: 80.0, 1: 90.0, 2: 100.0 | 90.0 ± 5.8 |"
-    assert "| SQIL | 0: 95.0 | 95.0 | 0: 0.0 | 0.0 |" in table  # one seed: no spread
+    # deploy: pooled 270 / 300 episodes; mean 90, sample std 10, SE 10 / sqrt(3) = 5.77; IQM of
+    # 3 seeds = their mean; bootstrap 2.5% of the 27 resample means: 0.65 of the way from
+    # 80 (one resample) to 83.3 ((80, 80, 90), three resamples) = 82.2.
+    assert c_sqil == ("| C-SQIL | 0: 90.0, 1: 90.0, 2: 90.0 | 90.0 | 90.0 ± 0.0 | 90.0 [90.0, 90.0] "
+                      "| 0: 80.0, 1: 90.0, 2: 100.0 | 90.0 | 90.0 ± 5.8 | 90.0 [82.2, 97.8] |")
+    assert "| SQIL | 0: 95.0 | 95.0 | 95.0 | 95.0 | 0: 0.0 | 0.0 | 0.0 | 0.0 |" in table  # one seed: no spread
     assert seed_spread([0.2, 0.4]) == pytest.approx((0.3, 0.1))
     with pytest.raises(ValueError, match="at least one"):
         seed_spread([])

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.evaluation.runs import RunRecord, Setting
+from torchrl_causal.evaluation.seed_statistics import bootstrap_interval, interquartile_mean
 
 __all__ = [
     "TABLE1_ALGORITHMS",
@@ -36,6 +37,7 @@ __all__ = [
     "raw_markdown",
     "lengths_markdown",
     "seed_spread",
+    "iqm_with_interval",
     "seeds_markdown",
     "EffectCheck",
     "EffectTargets",
@@ -295,37 +297,68 @@ def seed_spread(values: Sequence[float]) -> tuple[float, float]:
     return mean, math.sqrt(variance / n)
 
 
-def _success_by_seed(runs: Iterable[RunRecord]) -> dict[str, dict[str, dict[int, float]]]:
-    """label -> regime -> {seed: success rate}, seeds in ascending order."""
-    rates: dict[str, dict[str, dict[int, float]]] = defaultdict(lambda: defaultdict(dict))
+def _results_by_seed(runs: Iterable[RunRecord]) -> dict[str, dict[str, dict[int, EvaluationResult]]]:
+    """label -> regime -> {seed: evaluation}, seeds in ascending order."""
+    results: dict[str, dict[str, dict[int, EvaluationResult]]] = defaultdict(lambda: defaultdict(dict))
     for run in sorted(runs, key=lambda r: r.seed):
         for regime, result in run.evaluations.items():
-            rates[run.label][regime][run.seed] = result.success_rate
-    return rates
+            results[run.label][regime][run.seed] = result
+    return results
+
+
+def _success_by_seed(runs: Iterable[RunRecord]) -> dict[str, dict[str, dict[int, float]]]:
+    """label -> regime -> {seed: success rate}, seeds in ascending order."""
+    return {label: {regime: {seed: result.success_rate for seed, result in by_seed.items()}
+                    for regime, by_seed in regimes.items()}
+            for label, regimes in _results_by_seed(runs).items()}
+
+
+def iqm_with_interval(values: Sequence[float], digits: int = 1) -> str:
+    """``IQM [low, high]``: the interquartile mean over seeds and its 95% percentile-bootstrap
+    interval (rliable's estimators, :mod:`~torchrl_causal.evaluation.seed_statistics`); one
+    seed gives its value alone.
+
+    Examples:
+        >>> iqm_with_interval([80.0, 90.0, 100.0])
+        '90.0 [82.2, 97.8]'
+        >>> iqm_with_interval([95.0])
+        '95.0'
+    """
+    iqm = interquartile_mean(values)
+    if len(values) < 2:
+        return f"{iqm:.{digits}f}"
+    low, high = bootstrap_interval(values)
+    return f"{iqm:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
 
 
 def seeds_markdown(runs: Iterable[RunRecord]) -> str:
-    """Success rate of every seed (``seed: %``, so that a row missing a seed says which) and
-    its mean ± standard error over seeds, both regimes.
+    """Success rate of every seed (``seed: %``, so that a row missing a seed says which),
+    the rate pooled over their episodes, the mean ± standard error over seeds and the
+    interquartile mean with its 95% bootstrap interval over seeds, both regimes.
 
     The other tables pool the episodes of all seeds (their ± is the episode-level standard
     error, which is what the paper's Table 1 reports: 87.6 ± 1.0 is the binomial error of
-    1000 episodes); this one shows how much the training seed matters.
+    1000 episodes); this one shows how much the training seed matters: a gap between two
+    rows that their seed intervals span may be seed noise.
     """
-    rates = _success_by_seed(runs)
+    results = _results_by_seed(runs)
     header = ["Algorithm"]
     for regime in REGIMES:
-        header += [f"SR % per seed ({regime})", f"mean ± SE over seeds ({regime})"]
+        header += [f"SR % per seed ({regime})", f"pooled SR % ({regime})", f"mean ± SE over seeds ({regime})",
+                   f"IQM [95% bootstrap CI] over seeds ({regime})"]
     rows = []
-    for label in ordered_labels(rates):
+    for label in ordered_labels(results):
         row = [display_name(label)]
         for regime in REGIMES:
-            by_seed = {seed: 100 * rate for seed, rate in rates[label].get(regime, {}).items()}
+            by_seed = results[label].get(regime, {})
             if not by_seed:
-                row += ["—", "—"]
+                row += ["—"] * 4
                 continue
-            row.append(", ".join(f"{seed}: {value:.1f}" for seed, value in by_seed.items()))
-            row.append(_pm(*seed_spread(list(by_seed.values()))))
+            rates = [100 * result.success_rate for result in by_seed.values()]
+            row.append(", ".join(f"{seed}: {rate:.1f}" for seed, rate in zip(by_seed, rates)))
+            row.append(f"{100 * EvaluationResult.pool(list(by_seed.values())).success_rate:.1f}")
+            row.append(_pm(*seed_spread(rates)))
+            row.append(iqm_with_interval(rates))
         rows.append(row)
     return _markdown(header, rows)
 
