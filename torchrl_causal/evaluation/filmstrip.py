@@ -4,6 +4,7 @@ goal)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,7 +19,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp  
 
 from torchrl_causal.evaluation.metrics import Policy  # noqa: E402
 
-__all__ = ["Filmstrip", "record_filmstrip", "save_filmstrips"]
+__all__ = ["EpisodeOutcome", "Filmstrip", "record_filmstrip", "rendered_episode", "save_filmstrips"]
 
 
 @dataclass(frozen=True)
@@ -45,21 +46,66 @@ def _evenly_spaced(count: int, available: int) -> list[int]:
     return sorted({round(i * (available - 1) / (count - 1)) for i in range(count)})
 
 
+@dataclass
+class EpisodeOutcome:
+    """How a rendered episode ended (filled in as :func:`rendered_episode` runs)."""
+
+    success: bool = False
+    length: int = 0
+
+
 @torch.no_grad()
-def record_filmstrip(env: EnvBase, policy: Policy, *, max_steps: int, frames: int = 6, every: int = 10,
-                     width: int = 240, height: int = 240, camera: str | None = None) -> Filmstrip:
-    """Runs one episode of ``policy`` (its deterministic mode) in ``env`` and keeps
-    ``frames`` evenly spaced frames of it, the first (after reset) and the last included.
+def rendered_episode(env: EnvBase, policy: Policy, *, max_steps: int, every: int, width: int, height: int,
+                     camera: str | None = None, outcome: EpisodeOutcome | None = None
+                     ) -> Iterator[tuple[int, np.ndarray]]:
+    """Runs one episode of ``policy`` (its deterministic mode) in ``env`` and yields
+    ``(step, frame)``: the render after reset (step 0), after every ``every``-th step, and
+    after the last step. ``outcome`` (when given) holds the episode's success and length
+    once the generator is exhausted.
 
     Args:
         env: a MuJoCo maze env with batch size ``(1,)``, possibly inside a
             ``TransformedEnv`` (the imitator's view), seeded by the caller.
         policy: reads the env's observation, writes ``"action"``.
         max_steps: the longest episode to run (the env's horizon).
-        frames: how many frames the strip keeps.
-        every: a candidate frame is rendered every this many steps (and at the end).
+        every: a frame is rendered every this many steps (and at the end).
         width, height, camera: passed to the env's ``render`` (``camera=None`` looks down
             on the whole maze).
+    """
+    if tuple(env.batch_size) != (1,):
+        raise ValueError(f"recording needs an env with batch size (1,), got {tuple(env.batch_size)}")
+    if every < 1 or max_steps < 1:
+        raise ValueError(f"need every >= 1 and max_steps >= 1, got {every}, {max_steps}")
+    scene = _renderable(env)
+    outcome = EpisodeOutcome() if outcome is None else outcome
+
+    def render() -> np.ndarray:
+        return scene.render(width=width, height=height, camera=camera)[0]
+
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        td = env.reset()
+        yield 0, render()
+        for step in range(1, max_steps + 1):
+            td = env.step(policy(td))
+            outcome.length = step
+            outcome.success = bool(td["next", "success"].any())
+            done = bool(td["next", "done"].any())
+            if step % every == 0 or done or step == max_steps:
+                yield step, render()
+            if done:
+                break
+            td = step_mdp(td, keep_other=True)
+
+
+def record_filmstrip(env: EnvBase, policy: Policy, *, max_steps: int, frames: int = 6, every: int = 10,
+                     width: int = 240, height: int = 240, camera: str | None = None) -> Filmstrip:
+    """Runs one episode of ``policy`` (see :func:`rendered_episode`) and keeps ``frames``
+    evenly spaced frames of it, the first (after reset) and the last included.
+
+    Args:
+        env, policy, max_steps, width, height, camera: as :func:`rendered_episode` takes them.
+        frames: how many frames the strip keeps.
+        every: a candidate frame is rendered every this many steps (and at the end).
 
     Examples:
         >>> from torchrl_causal.envs import AntMazeEnv, AntMazeExpert
@@ -68,33 +114,14 @@ def record_filmstrip(env: EnvBase, policy: Policy, *, max_steps: int, frames: in
         >>> strip.steps, strip.frames[0].shape, strip.length
         ((0, 20, 30), (32, 32, 3), 30)
     """
-    if tuple(env.batch_size) != (1,):
-        raise ValueError(f"record_filmstrip needs an env with batch size (1,), got {tuple(env.batch_size)}")
-    if frames < 2 or every < 1 or max_steps < 1:
-        raise ValueError(f"need frames >= 2, every >= 1 and max_steps >= 1, got {frames}, {every}, {max_steps}")
-    scene = _renderable(env)
-
-    def render() -> np.ndarray:
-        return scene.render(width=width, height=height, camera=camera)[0]
-
-    success = False
-    length = 0
-    with set_exploration_type(ExplorationType.DETERMINISTIC):
-        td = env.reset()
-        candidates, steps = [render()], [0]
-        for step in range(1, max_steps + 1):
-            td = env.step(policy(td))
-            length = step
-            success = bool(td["next", "success"].any())
-            done = bool(td["next", "done"].any())
-            if step % every == 0 or done or step == max_steps:
-                candidates.append(render())
-                steps.append(step)
-            if done:
-                break
-            td = step_mdp(td, keep_other=True)
+    if frames < 2:
+        raise ValueError(f"need frames >= 2, got {frames}")
+    outcome = EpisodeOutcome()
+    steps, candidates = zip(*rendered_episode(env, policy, max_steps=max_steps, every=every, width=width,
+                                              height=height, camera=camera, outcome=outcome))
     keep = _evenly_spaced(frames, len(candidates))
-    return Filmstrip(tuple(candidates[i] for i in keep), tuple(steps[i] for i in keep), success, length)
+    return Filmstrip(tuple(candidates[i] for i in keep), tuple(steps[i] for i in keep), outcome.success,
+                     outcome.length)
 
 
 def save_filmstrips(strips: dict[str, Filmstrip], path: str | Path) -> Path:
