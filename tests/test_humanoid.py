@@ -10,14 +10,15 @@ a few metres alone drifts a random-action trajectory apart by 1e-3 within 200 st
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
+import ogbench
 import pytest
 import torch
+from ogbench.online_locomotion.humanoid import tolerance  # OGBench's skill reward parts
 
 from torchrl_causal.envs import GustProcess, HumanoidMazeEnv
-from torchrl_causal.envs.humanoid import HUMANOID_COLUMNS
-
-ogbench = pytest.importorskip("ogbench")
+from torchrl_causal.envs.humanoid import HumanoidLocomotionEnv
 
 #: A world point 2.5 m from every wall of OGBench's medium maze and of ours.
 CLEAR_POINT = np.array([1.5, 2.0])
@@ -112,3 +113,53 @@ def test_trajectories_match_ogbench_step_for_step(start):
                                    rtol=1e-5, atol=1e-4)
         assert _wall_contacts(reference.model, reference.data) == 0 and _wall_contacts(ours.simulator.model, data) == 0
     assert reference.data.ncon > 0  # it was on the floor, not in free flight
+
+
+# -- the walking skill's open-ground task -----------------------------------------------------
+
+
+def test_skill_observation_is_ogbench_skill_observation():
+    env = HumanoidLocomotionEnv(batch_size=2, seed=0)
+    td = env.rollout(20, break_when_any_done=False)[:, -1]["next"]
+    reference = _ogbench_medium()
+    for index, data in enumerate(env.simulation.datas):
+        reference.set_state(data.qpos.copy(), data.qvel.copy())
+        expected = torch.as_tensor(reference.get_ob()[2:], dtype=torch.float32)  # OGBench's skill input: no xy
+        torch.testing.assert_close(td["observation"][index, :67], expected, rtol=1e-5, atol=1e-5)
+        torch.testing.assert_close(td["observation"][index, 67:], td["direction"][index])
+
+
+def test_skill_reward_is_stand_times_capped_speed_and_a_low_head_ends_it():
+    env = HumanoidLocomotionEnv(batch_size=1, speed_cap=0.05, gust_process=GustProcess(probability=0.0), seed=1)
+    model = env.simulation.model
+    head, torso = model.body("head").id, model.body("torso").id
+    generator = torch.Generator().manual_seed(2)
+    td = env.reset()
+    capped = 0
+    for step in range(200):
+        td["action"] = 2 * torch.rand(1, 21, generator=generator) - 1
+        before = env.simulation.qpos()[0, :2]
+        td = env.step(td)["next"]
+        data = env.simulation.datas[0]
+        mujoco.mj_kinematics(model, data)  # body poses of the state after the step
+        speed = float((data.qpos[:2] - before) @ td["direction"][0].double().numpy()) / 0.025
+        stand = tolerance(data.xpos[head, 2], bounds=(1.4, float("inf")), margin=0.35) * tolerance(
+            data.xmat[torso][8], bounds=(0.9, float("inf")), margin=1.9, sigmoid="linear", value_at_margin=0)
+        assert td["speed"].item() == pytest.approx(speed, abs=1e-4)
+        assert td["reward"].item() == pytest.approx(stand * (1 + min(speed, 0.05)), abs=1e-4)
+        capped += speed > 0.05
+        assert td["terminated"].item() == (data.xpos[head, 2] < 0.9)
+        if td["terminated"].item():
+            break
+    assert 10 < step < 199 and capped > 0  # it stood a while, walked past the cap once, then fell
+
+
+def test_skill_commands_are_redrawn_within_the_period_range():
+    env = HumanoidLocomotionEnv(batch_size=4, direction_period=(3, 5), gust_process=GustProcess(probability=0.0), seed=0)
+    slack = lambda td: td.set("action", torch.zeros(4, 21))  # noqa: E731  (it takes ~35 steps to fall)
+    rollout = env.rollout(30, slack, break_when_any_done=False)
+    assert not rollout["next", "done"].any()  # no fall yet: a reset would redraw the command too
+    direction = rollout["direction"]
+    changes = [(direction[k, 1:] != direction[k, :-1]).any(-1).nonzero().flatten() for k in range(4)]
+    gaps = torch.cat([torch.diff(torch.cat((torch.tensor([-1]), c))) for c in changes])
+    assert gaps.min() >= 3 and gaps.max() <= 5 and len(gaps.unique()) > 1

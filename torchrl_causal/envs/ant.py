@@ -17,7 +17,6 @@ that outputs the tanh-Gaussian's pre-tanh mean and log-std), and
 
 from __future__ import annotations
 
-import math
 import pathlib
 from collections.abc import Sequence
 
@@ -25,12 +24,10 @@ import gymnasium
 import mujoco
 import numpy as np
 import torch
-from tensordict import TensorDict, TensorDictBase
 from torch import nn
-from torchrl.data import Binary, Bounded, Composite, Unbounded
-from torchrl.envs import EnvBase
 
 from torchrl_causal.envs.base import GustProcess
+from torchrl_causal.envs.locomotion import DirectionalLocomotionEnv, load_skill_network, make_skill_network
 from torchrl_causal.envs.mujoco_maze import BatchedSimulation
 
 __all__ = [
@@ -91,43 +88,24 @@ def ogbench_ant_physics(spec: mujoco.MjSpec) -> None:
 
 
 def make_locomotion_network(hidden: int = 256) -> nn.Module:
-    """The locomotion policy body: ``observation (29) -> (pre-tanh mean (8), log-std (8))``.
-
-    Two hidden ReLU layers of ``hidden`` units (OGBench's 2 x 256 SAC networks).
+    """The ant's locomotion policy body: ``observation (29) -> (pre-tanh mean (8), log-std (8))``.
 
     Examples:
         >>> make_locomotion_network()(torch.zeros(3, LOCOMOTION_OBSERVATION_DIM)).shape
         torch.Size([3, 16])
     """
-    return nn.Sequential(
-        nn.Linear(LOCOMOTION_OBSERVATION_DIM, hidden),
-        nn.ReLU(),
-        nn.Linear(hidden, hidden),
-        nn.ReLU(),
-        nn.Linear(hidden, 2 * _NU),
-    )
+    return make_skill_network(LOCOMOTION_OBSERVATION_DIM, _NU, hidden)
 
 
 def load_locomotion_network(path: str | pathlib.Path = LOCOMOTION_WEIGHTS) -> nn.Module:
-    """The locomotion body with trained weights (``torch.load(..., weights_only=True)``), in eval mode.
+    """The ant's locomotion body with trained weights (``torch.load(..., weights_only=True)``), in eval mode.
 
     Raises:
         FileNotFoundError: naming the command that regenerates the weights.
         RuntimeError: when the file is not a state dict of :func:`make_locomotion_network`.
     """
-    path = pathlib.Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(
-            f"no ant locomotion weights at {path}; regenerate them with "
-            "`python -m torchrl_causal.trainers.locomotion` (about 2.5 CPU-hours)"
-        )
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-        network = make_locomotion_network()
-        network.load_state_dict(state)
-    except Exception as err:  # a truncated file, a foreign pickle or a different architecture
-        raise RuntimeError(f"{path} is not a valid ant locomotion state dict: {err}") from err
-    return network.eval()
+    return load_skill_network(path, make_locomotion_network(),
+                              regenerate="python -m torchrl_causal.trainers.locomotion --skill ant (about 2.5 CPU-hours)")
 
 
 def locomotion_observation(qpos_tail: torch.Tensor, qvel: torch.Tensor, direction: torch.Tensor) -> torch.Tensor:
@@ -135,7 +113,7 @@ def locomotion_observation(qpos_tail: torch.Tensor, qvel: torch.Tensor, directio
     return torch.cat((qpos_tail, qvel, direction), dim=-1)
 
 
-class AntLocomotionEnv(EnvBase):
+class AntLocomotionEnv(DirectionalLocomotionEnv):
     """OGBench's ant walking along a commanded direction in open ground, in the wind.
 
     Observation ``"observation"``: ``qpos[2:]`` (torso height, orientation quaternion, 8
@@ -146,9 +124,8 @@ class AntLocomotionEnv(EnvBase):
     ``direction_period`` steps; the maze suite's :class:`~torchrl_causal.envs.GustProcess`
     pushes the torso (newtons, redrawn every 5 steps). Episodes terminate when the torso
     leaves ``z in [0.2, 1]`` and are truncated at ``horizon``. Resets add OGBench's noise
-    (uniform 0.1 on qpos, N(0, 0.1²) on qvel); a ``"direction"`` entry in the reset
-    tensordict fixes the first commanded directions instead of drawing them. The direction is also under ``"direction"``
-    and the torso's xy position under ``"xy"`` (for evaluation, not in the observation).
+    (uniform 0.1 on qpos, N(0, 0.1²) on qvel). The rest is
+    :class:`~torchrl_causal.envs.locomotion.DirectionalLocomotionEnv`'s.
 
     Args:
         batch_size: number of independent simulations (one dimension).
@@ -173,87 +150,22 @@ class AntLocomotionEnv(EnvBase):
         gust_process: GustProcess | None = None,
         seed: int | None = None,
     ) -> None:
-        shape = (batch_size,) if isinstance(batch_size, int) else tuple(batch_size)
-        if len(shape) != 1 or shape[0] < 1:
-            raise ValueError(f"batch_size must be one positive dimension, got {batch_size!r}")
-        if horizon < 1 or direction_period < 1:
-            raise ValueError(f"horizon and direction_period must be >= 1, got {horizon}, {direction_period}")
-        super().__init__(batch_size=torch.Size(shape), device="cpu")
-        self.horizon, self.direction_period = horizon, direction_period
-        self.gust_process = GustProcess() if gust_process is None else gust_process
+        count = self.batch_count(batch_size)
         spec = mujoco.MjSpec.from_file(str(ANT_XML))
         ogbench_ant_physics(spec)
-        self.simulation = BatchedSimulation(spec.compile(), num_envs=shape[0], frame_skip=OGBENCH_FRAME_SKIP)
-        self.rng = torch.Generator()
-        self._set_seed(seed)
-        n = shape[0]
-        self._direction = torch.zeros(n, 2)
-        self._gust = torch.zeros(n, 2)
-        self._steps = torch.zeros(n, 1, dtype=torch.int64)
-        self.observation_spec = Composite(
-            observation=Unbounded(shape=(n, LOCOMOTION_OBSERVATION_DIM)),
-            direction=Unbounded(shape=(n, 2)),
-            xy=Unbounded(shape=(n, 2)),
-            shape=(n,),
-        )
-        self.action_spec = Bounded(-1.0, 1.0, shape=(n, _NU))
-        self.reward_spec = Unbounded(shape=(n, 1))
-        flag = Binary(n=1, shape=(n, 1), dtype=torch.bool)
-        self.full_done_spec = Composite(done=flag.clone(), terminated=flag.clone(), truncated=flag.clone(), shape=(n,))
+        super().__init__(BatchedSimulation(spec.compile(), num_envs=count, frame_skip=OGBENCH_FRAME_SKIP),
+                         observation_dim=LOCOMOTION_OBSERVATION_DIM, horizon=horizon,
+                         direction_period=direction_period, gust_process=gust_process, seed=seed)
 
-    def _set_seed(self, seed: int | None) -> None:
-        self.rng.manual_seed(int(torch.randint(0, 2**62, ()).item()) if seed is None else seed)
+    def _start_state(self, count: int) -> tuple[np.ndarray, np.ndarray]:
+        model = self.simulation.model
+        uniform = torch.rand(count, model.nq, generator=self.rng, dtype=torch.float64) * 2 - 1
+        gaussian = torch.randn(count, model.nv, generator=self.rng, dtype=torch.float64)
+        return model.qpos0 + OGBENCH_QPOS_NOISE * uniform.numpy(), OGBENCH_QVEL_NOISE * gaussian.numpy()
 
-    def _draw_directions(self, count: int) -> torch.Tensor:
-        angle = 2 * math.pi * torch.rand(count, generator=self.rng)
-        return torch.stack((angle.cos(), angle.sin()), dim=-1)
+    def _read(self, qpos: np.ndarray) -> torch.Tensor:
+        return torch.cat((torch.from_numpy(qpos[:, 2:]), torch.from_numpy(self.simulation.qvel())), dim=-1).float()
 
-    def _observe(self, qpos: np.ndarray) -> TensorDict:
-        """The observation for ``qpos`` (read once per step by the caller) and the current directions."""
-        position = torch.from_numpy(qpos).float()
-        qvel = torch.from_numpy(self.simulation.qvel()).float()
-        return TensorDict(
-            observation=locomotion_observation(position[:, 2:], qvel, self._direction),
-            direction=self._direction.clone(),
-            xy=position[:, :2],
-            batch_size=self.batch_size,
-        )
-
-    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
-        n = self.batch_size[0]
-        mask = torch.ones(n, dtype=torch.bool)
-        if tensordict is not None and "_reset" in tensordict.keys():
-            mask = tensordict.get("_reset").reshape(n)
-        indices = mask.nonzero().flatten()
-        if len(indices):
-            model = self.simulation.model
-            count = len(indices)
-            uniform = torch.rand(count, model.nq, generator=self.rng, dtype=torch.float64) * 2 - 1
-            gaussian = torch.randn(count, model.nv, generator=self.rng, dtype=torch.float64)
-            qpos = model.qpos0 + OGBENCH_QPOS_NOISE * uniform.numpy()
-            self.simulation.reset(indices.numpy(), qpos, OGBENCH_QVEL_NOISE * gaussian.numpy())
-            given = None if tensordict is None else tensordict.get("direction", None)
-            self._direction[indices] = self._draw_directions(count) if given is None else given[indices].float()
-            self._gust[indices] = self.gust_process.draw((count,), generator=self.rng)
-            self._steps[indices] = 0
-        return self._observe(self.simulation.qpos())
-
-    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
-        before = tensordict.get("xy")
-        ctrl = tensordict.get("action").detach().clamp(-1.0, 1.0).numpy()
-        self.simulation.step(ctrl, self._gust.numpy())
-        qpos = self.simulation.qpos()
-        velocity = (torch.from_numpy(qpos[:, :2]).float() - before) / self.simulation.control_dt
-        reward = (velocity * self._direction).sum(-1, keepdim=True)
-        height = torch.from_numpy(qpos[:, 2:3]).float()
-        terminated = (height < 0.2) | (height > 1.0)
-        self._steps += 1
-        truncated = self._steps >= self.horizon
-        redraw = (self._steps % self.direction_period == 0).flatten()
-        if redraw.any():
-            self._direction[redraw] = self._draw_directions(int(redraw.sum()))
-        self._gust = self.gust_process.advance(self._gust, self._steps, generator=self.rng)
-        out = self._observe(qpos)
-        out.update({"reward": reward, "terminated": terminated, "truncated": truncated,
-                    "done": terminated | truncated})
-        return out
+    def _reward_and_fall(self, speed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        height = torch.from_numpy(self.simulation.qpos()[:, 2:3]).float()
+        return speed, (height < 0.2) | (height > 1.0)

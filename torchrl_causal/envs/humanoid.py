@@ -9,7 +9,8 @@ copy; ``tests/test_humanoid.py`` steps OGBench's own maze env and ours side by s
 
 :func:`read_humanoid_variables` is OGBench's ``HumanoidEnv.get_ob`` written into a variable
 buffer (the paper's P, A, H, E, V, C, J); :func:`standing_qpos` is the standing start shared by
-the maze and the locomotion skill's open ground.
+the maze and the locomotion skill's open ground; :class:`HumanoidLocomotionEnv` is that skill's
+open-ground task.
 """
 
 from __future__ import annotations
@@ -17,11 +18,25 @@ from __future__ import annotations
 import importlib.util
 import pathlib
 
+from collections.abc import Sequence
+
 import mujoco
 import numpy as np
+import torch
+from ogbench.online_locomotion.humanoid import tolerance
+
+from torchrl_causal.envs.base import GustProcess
+from torchrl_causal.envs.locomotion import DirectionalLocomotionEnv
+from torchrl_causal.envs.mujoco_maze import BatchedSimulation
 
 __all__ = [
     "HUMANOID_COLUMNS",
+    "HUMANOID_SKILL_OBSERVATION_DIM",
+    "HUMANOID_SKILL_VARIABLES",
+    "HumanoidLocomotionEnv",
+    "START_QPOS_NOISE",
+    "START_QVEL_NOISE",
+    "stand_reward",
     "HUMANOID_EXTREMITIES",
     "HUMANOID_FRAME_SKIP",
     "HUMANOID_STATE_WIDTH",
@@ -59,6 +74,9 @@ HUMANOID_COLUMNS = {
     "J": slice(_NQ, _NQ + _NV),
 }
 HUMANOID_STATE_WIDTH = _COM + 3
+#: The standing start's noise: uniform half-width on qpos, standard deviation of qvel.
+START_QPOS_NOISE = 0.01
+START_QVEL_NOISE = 0.01
 
 
 class HumanoidReadout:
@@ -124,3 +142,105 @@ def standing_qpos(model: mujoco.MjModel, yaw: np.ndarray, *, clearance: float = 
     qpos[:, 3:7] = np.stack((np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)), axis=-1)
     return qpos
 
+
+
+#: The skill's variables, in OGBench's skill-observation order (its ``online-humanoid`` ``_get_obs``):
+#: everything the maze expert reads except the position P, so the skill is translation-invariant.
+HUMANOID_SKILL_VARIABLES = ("A", "H", "E", "V", "C", "J")
+#: The skill's observation: those 67 dims and the commanded unit direction (2).
+HUMANOID_SKILL_OBSERVATION_DIM = 67 + 2
+_SKILL_COLUMNS = np.concatenate([np.arange(HUMANOID_STATE_WIDTH)[HUMANOID_COLUMNS[v]] for v in HUMANOID_SKILL_VARIABLES])
+
+
+class HumanoidLocomotionEnv(DirectionalLocomotionEnv):
+    """OGBench's humanoid walking along a commanded direction in open ground, shaken by tremors.
+
+    The issue-38 skill task, shaped on OGBench's own humanoid skill (``DMCHumanoidXYWrapper``):
+
+    * observation (69): the expert's variables without P (:data:`HUMANOID_SKILL_VARIABLES`:
+      hinge angles, head height, extremities, torso vertical, centre-of-mass velocity C, ``qvel``),
+      then the command, OGBench's order; never the vibration sensor W;
+    * reward ``stand * (1 + min(speed, speed_cap))``, ``stand`` dm_control's (head at 1.4 m or
+      above, margin 0.35, times torso uprightness) and ``speed`` the torso's ground-plane velocity
+      along the command in m/s (OGBench: ``1 + 2.5 speed``, uncapped);
+    * start standing (:func:`standing_qpos`, uniform yaw, the maze's noise); terminate when the head
+      drops below ``fall_height`` (OGBench starts fallen and never terminates: the standing start
+      and the termination are what make the skill affordable here);
+    * command redrawn every 100-200 steps (uniform), the maze's tremor process on the torso.
+
+    Args:
+        batch_size: number of independent simulations (one dimension).
+        horizon: steps before truncation.
+        direction_period: steps between redraws, or an inclusive ``(low, high)`` range.
+        speed_cap: speed (m/s) beyond which walking faster earns nothing.
+        fall_height: head height (m) below which the episode terminates.
+        gust_process: the tremor (the maze suite's by default).
+        seed: seed of the env's generator.
+
+    Examples:
+        >>> env = HumanoidLocomotionEnv(batch_size=2, seed=0)
+        >>> td = env.rollout(3)
+        >>> td["observation"].shape, td["next", "speed"].shape
+        (torch.Size([2, 3, 69]), torch.Size([2, 3, 1]))
+    """
+
+    def __init__(
+        self,
+        batch_size: int | Sequence[int] = 1,
+        *,
+        horizon: int = 1000,
+        direction_period: int | tuple[int, int] = (100, 200),
+        speed_cap: float = 1.5,
+        fall_height: float = 0.9,
+        gust_process: GustProcess | None = None,
+        seed: int | None = None,
+    ) -> None:
+        count = self.batch_count(batch_size)
+        if not speed_cap > 0 or not fall_height > 0:
+            raise ValueError(f"speed_cap and fall_height must be > 0, got {speed_cap}, {fall_height}")
+        self.speed_cap, self.fall_height = float(speed_cap), float(fall_height)
+        model = mujoco.MjModel.from_xml_path(str(HUMANOID_XML))
+        self._readout = HumanoidReadout(model)
+        self._variables = np.zeros((count, HUMANOID_STATE_WIDTH))
+        super().__init__(BatchedSimulation(model, num_envs=count, frame_skip=HUMANOID_FRAME_SKIP),
+                         observation_dim=HUMANOID_SKILL_OBSERVATION_DIM, horizon=horizon,
+                         direction_period=direction_period, gust_process=gust_process, seed=seed)
+
+    def _start_state(self, count: int) -> tuple[np.ndarray, np.ndarray]:
+        model = self.simulation.model
+        yaw = 2 * np.pi * torch.rand(count, generator=self.rng, dtype=torch.float64).numpy()
+        uniform = torch.rand(count, model.nq, generator=self.rng, dtype=torch.float64).numpy() * 2 - 1
+        gaussian = torch.randn(count, model.nv, generator=self.rng, dtype=torch.float64).numpy()
+        qpos = standing_qpos(model, yaw, clearance=START_QPOS_NOISE) + START_QPOS_NOISE * uniform
+        return qpos, START_QVEL_NOISE * gaussian
+
+    def _read(self, qpos: np.ndarray) -> torch.Tensor:
+        for data, row in zip(self.simulation.datas, self._variables):
+            self._readout.read(data, row)
+        return torch.from_numpy(self._variables[:, _SKILL_COLUMNS]).float()
+
+    def _reward_and_fall(self, speed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        # _read ran for the previous observation only: read the state after this step first.
+        for data, row in zip(self.simulation.datas, self._variables):
+            self._readout.read(data, row)
+        head = self._variables[:, HUMANOID_COLUMNS["H"]]
+        upright = self._variables[:, HUMANOID_COLUMNS["V"]][:, 2:]
+        stand = torch.from_numpy(stand_reward(head, upright)).float()
+        reward = stand * (1 + speed.clamp(max=self.speed_cap))
+        return reward, torch.from_numpy(head < self.fall_height)
+
+
+def stand_reward(head_height: np.ndarray, torso_upright: np.ndarray) -> np.ndarray:
+    """dm_control's humanoid ``standing * upright`` in ``[0, 1]`` (OGBench's skill reward's factor).
+
+    ``standing`` is 1 with the head at 1.4 m or above and decays as a Gaussian with 0.1 at
+    0.35 m below; ``upright`` (the torso's z-axis world component) is 1 above 0.9, falling
+    linearly to 0 at -1.
+
+    Examples:
+        >>> stand_reward(np.array([1.5, 1.05, 1.5]), np.array([1.0, 1.0, -1.0])).round(3).tolist()
+        [1.0, 0.1, 0.0]
+    """
+    standing = tolerance(head_height, bounds=(1.4, float("inf")), margin=1.4 / 4)
+    upright = tolerance(torso_upright, bounds=(0.9, float("inf")), margin=1.9, sigmoid="linear", value_at_margin=0)
+    return standing * upright

@@ -38,6 +38,8 @@ from torchrl_causal.envs.humanoid import (
     HUMANOID_FRAME_SKIP,
     HUMANOID_STATE_WIDTH,
     HUMANOID_XML,
+    START_QPOS_NOISE,
+    START_QVEL_NOISE,
     HumanoidReadout,
     standing_qpos,
 )
@@ -96,8 +98,8 @@ class HumanoidMazeEnv(MujocoMazeEnv):
         "large": MazeTask("large", start_cell=(1, 1), goal_cell=(7, 10)),
     }
     default_horizon: ClassVar[int] = 2000
-    qpos_noise: ClassVar[float] = 0.01
-    qvel_noise_std: ClassVar[float] = 0.01
+    qpos_noise: ClassVar[float] = START_QPOS_NOISE
+    qvel_noise_std: ClassVar[float] = START_QVEL_NOISE
 
     @property
     def causal_template(self) -> TimeSliceTemplate:

@@ -1,19 +1,30 @@
-"""The ant expert's locomotion skill: SAC in open ground, in the wind, with TorchRL parts.
+"""The maze experts' walking skills: SAC in open ground, in the gusts, with TorchRL parts.
 
-OGBench generated its AntMaze datasets with a goal-direction locomotion policy steered by a
-planner; this trains that policy the way OGBench did (SAC, 2 x 256 MLPs, batch 256,
-gamma 0.99, tau 0.005, 10k uniformly random steps, one gradient step per env step, ~400k env
-steps) on :class:`~torchrl_causal.envs.ant.AntLocomotionEnv`, with TorchRL's
-:class:`~torchrl.objectives.SACLoss`, :class:`~torchrl.collectors.Collector` and
-:class:`~torchrl.data.TensorDictReplayBuffer`.
+OGBench generated its maze datasets with goal-direction locomotion policies steered by a
+planner; this trains such a policy (SAC, 2 x 256 MLPs, batch 256, gamma 0.99, tau 0.005,
+uniformly random warm-up steps) on a :class:`~torchrl_causal.envs.locomotion.DirectionalLocomotionEnv`,
+with TorchRL's :class:`~torchrl.objectives.SACLoss`, :class:`~torchrl.collectors.Collector` and
+:class:`~torchrl.data.TensorDictReplayBuffer`. A :class:`LocomotionSkill` names what differs
+between agents (env, network, default budget, where the weights ship): :data:`SKILLS` has the
+ant's (:class:`~torchrl_causal.envs.ant.AntLocomotionEnv`, OGBench's budget: ~400k env steps at
+one update per step) and the humanoid's (:class:`~torchrl_causal.envs.humanoid.HumanoidLocomotionEnv`,
+issue 38: 3M env steps at 0.5 updates per step, ~7-10 CPU-hours).
 
-Runs resume: every ``checkpoint_minutes`` the networks, optimisers, counters and RNG states
-go to ``<run_dir>/checkpoint.pt`` and the replay buffer to ``<run_dir>/buffer`` (both
-atomically); a restarted run continues from them (in-flight episodes restart). The best
-evaluation's policy body is exported to ``--output`` (by default the weights shipped in
-the package, :data:`~torchrl_causal.envs.ant.LOCOMOTION_WEIGHTS`)::
+Runs resume in two ways:
 
-    python -m torchrl_causal.trainers.locomotion --run-dir runs/ant_locomotion --steps 400000
+* on the same machine: every ``checkpoint_minutes`` the networks, optimisers, counters and RNG
+  states go to ``<run_dir>/checkpoint.pt`` and the replay buffer to ``<run_dir>/buffer`` (both
+  atomically); a restarted run continues from them (in-flight episodes restart);
+* across machines: each checkpoint also writes ``<run_dir>/resume_state.pt``, the few MB a run
+  needs without its buffer (actor, critics, target critics, alpha, optimiser states, counters).
+  ``--resume-from FILE`` starts a fresh run directory from such a file; the buffer refills from
+  the current policy (no random actions) before the updates go on.
+
+The best evaluation's policy body is exported to ``--output`` (by default the weights shipped
+in the package for that skill)::
+
+    python -m torchrl_causal.trainers.locomotion --skill ant --run-dir runs/ant_locomotion
+    python -m torchrl_causal.trainers.locomotion --skill humanoid --run-dir runs/humanoid_locomotion
 """
 
 from __future__ import annotations
@@ -24,7 +35,8 @@ import math
 import shutil
 import sys
 import time
-from dataclasses import asdict, dataclass
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -38,17 +50,16 @@ from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 from torchrl.objectives import SACLoss, SoftUpdate
 from torchrl.record.loggers.csv import CSVLogger
 
-from torchrl_causal.envs.ant import (
-    LOCOMOTION_OBSERVATION_DIM,
-    LOCOMOTION_WEIGHTS,
-    AntLocomotionEnv,
-    make_locomotion_network,
-)
+from torchrl_causal.envs.ant import LOCOMOTION_OBSERVATION_DIM, LOCOMOTION_WEIGHTS, AntLocomotionEnv
+from torchrl_causal.envs.humanoid import HUMANOID_SKILL_OBSERVATION_DIM, HumanoidLocomotionEnv
+from torchrl_causal.envs.locomotion import DirectionalLocomotionEnv, make_skill_network
 from torchrl_causal.trainers.run_directory import atomic_save, load_checkpoint
 
-__all__ = ["LocomotionConfig", "evaluate_locomotion", "make_locomotion_actor", "train_locomotion"]
+__all__ = ["SKILLS", "LocomotionConfig", "LocomotionSkill", "evaluate_locomotion", "make_locomotion_actor",
+           "train_locomotion"]
 
 _CHECKPOINT = "checkpoint.pt"
+_RESUME_STATE = "resume_state.pt"
 _BUFFER = "buffer"
 _CONFIG = "locomotion_config.json"
 #: what SACLoss reads; the collector's other entries (loc, scale, xy...) stay out of the buffer.
@@ -58,7 +69,12 @@ _TRANSITION_KEYS = ("observation", "action", ("next", "observation"), ("next", "
 
 @dataclass(frozen=True)
 class LocomotionConfig:
-    """Budget and hyperparameters of the locomotion SAC run (OGBench's by default)."""
+    """Budget and hyperparameters of a locomotion SAC run (OGBench's ant run by default).
+
+    ``random_steps`` uniformly random steps open a fresh run, and updates start once the buffer
+    holds more than ``random_steps`` transitions: a run resumed without its buffer refills it
+    from the current policy first.
+    """
 
     total_steps: int = 400_000
     buffer_size: int = 400_000
@@ -88,10 +104,50 @@ class LocomotionConfig:
             raise ValueError(f"need 0 < tau <= 1 and 0 < gamma < 1, got tau={self.tau}, gamma={self.gamma}")
 
 
-def make_locomotion_actor(body: nn.Module | None = None) -> ProbabilisticActor:
-    """The tanh-Gaussian SAC actor around :func:`~torchrl_causal.envs.ant.make_locomotion_network`.
+@dataclass(frozen=True)
+class LocomotionSkill:
+    """What a walking skill's SAC run needs to know about its agent.
 
-    Its deterministic action is ``tanh`` of the body's first 8 outputs, which is what
+    Args:
+        name: the CLI's ``--skill`` name.
+        make_env: ``(batch_size, seed) -> env`` on open ground.
+        observation_dim / action_dim: the policy's input and output widths.
+        weights: where the package ships the skill's policy body (the default export).
+        defaults: the :class:`LocomotionConfig` fields this skill changes.
+    """
+
+    name: str
+    make_env: Callable[[int, int], DirectionalLocomotionEnv]
+    observation_dim: int
+    action_dim: int
+    weights: Path
+    defaults: dict[str, Any] = field(default_factory=dict)
+
+    def config(self, **overrides: Any) -> LocomotionConfig:
+        """The skill's default :class:`LocomotionConfig` with ``overrides`` (``None`` values ignored)."""
+        return replace(LocomotionConfig(), **{**self.defaults, **{k: v for k, v in overrides.items() if v is not None}})
+
+    def network(self, hidden: int = 256) -> nn.Module:
+        """A fresh policy body (:func:`~torchrl_causal.envs.locomotion.make_skill_network`)."""
+        return make_skill_network(self.observation_dim, self.action_dim, hidden)
+
+
+#: The skills: OGBench's ant (its SAC budget) and OGBench's humanoid (issue 38's budget).
+SKILLS: dict[str, LocomotionSkill] = {
+    "ant": LocomotionSkill("ant", lambda n, seed: AntLocomotionEnv(batch_size=n, seed=seed),
+                           LOCOMOTION_OBSERVATION_DIM, 8, LOCOMOTION_WEIGHTS),
+    "humanoid": LocomotionSkill(
+        "humanoid", lambda n, seed: HumanoidLocomotionEnv(batch_size=n, seed=seed), HUMANOID_SKILL_OBSERVATION_DIM,
+        21, LOCOMOTION_WEIGHTS.with_name("humanoid_locomotion.pt"),
+        defaults={"total_steps": 3_000_000, "buffer_size": 1_000_000, "updates_per_step": 0.5, "num_envs": 8,
+                  "eval_every": 50_000, "eval_steps": 400}),
+}
+
+
+def make_locomotion_actor(body: nn.Module | None = None) -> ProbabilisticActor:
+    """The tanh-Gaussian SAC actor around a skill's policy body (the ant's by default).
+
+    Its deterministic action is ``tanh`` of the body's first half of outputs, which is what
     :class:`~torchrl_causal.envs.AntMazeExpert` computes from the exported body.
 
     Examples:
@@ -100,44 +156,52 @@ def make_locomotion_actor(body: nn.Module | None = None) -> ProbabilisticActor:
         >>> actor(TensorDict(observation=torch.zeros(2, 29), batch_size=[2]))["action"].shape
         torch.Size([2, 8])
     """
-    body = make_locomotion_network() if body is None else body
+    body = SKILLS["ant"].network() if body is None else body
     module = TensorDictModule(nn.Sequential(body, NormalParamExtractor()), in_keys=["observation"],
                               out_keys=["loc", "scale"])
     return ProbabilisticActor(module, in_keys=["loc", "scale"], out_keys=["action"], distribution_class=TanhNormal,
                               distribution_kwargs={"low": -1.0, "high": 1.0}, return_log_prob=False)
 
 
-def _make_critic(hidden: int) -> ValueOperator:
+def _make_critic(skill: LocomotionSkill, hidden: int) -> ValueOperator:
     # TorchRL's MLP concatenates its (observation, action) inputs.
-    network = MLP(in_features=LOCOMOTION_OBSERVATION_DIM + 8, out_features=1, num_cells=[hidden, hidden],
+    network = MLP(in_features=skill.observation_dim + skill.action_dim, out_features=1, num_cells=[hidden, hidden],
                   activation_class=nn.ReLU)
     return ValueOperator(network, in_keys=["observation", "action"])
 
 
 @torch.no_grad()
-def evaluate_locomotion(body: nn.Module, *, envs: int = 8, steps: int = 300, seed: int = 12345) -> dict[str, float]:
-    """Deterministic rollouts of ``body``: mean speed (m/s) along the commanded direction, and falls.
+def evaluate_locomotion(body: nn.Module, *, skill: str | LocomotionSkill = "ant", envs: int = 8, steps: int = 300,
+                        seed: int = 12345) -> dict[str, float]:
+    """Deterministic rollouts of ``body`` on open ground, in the gusts.
 
-    The direction is redrawn every 100 steps, so ``steps=300`` covers three directions per env.
+    Returns ``speed``, the mean ground-plane speed (m/s) along the command over every step;
+    ``fall_rate``, the fraction of envs that fell at least once (a fallen env restarts);
+    ``steps_to_fall``, the mean step of each env's first fall (``steps`` when none fell). The
+    ant's command changes every 100 steps, the humanoid's every 100-200.
     """
-    env = AntLocomotionEnv(batch_size=envs, horizon=steps, seed=seed)
+    skill = SKILLS[skill] if isinstance(skill, str) else skill
+    env = skill.make_env(envs, seed)
+    env.horizon = steps
     actor = make_locomotion_actor(body)
     with set_exploration_type(ExplorationType.DETERMINISTIC):
         rollout = env.rollout(steps, actor, break_when_any_done=False)
-    return {"speed": rollout["next", "reward"].mean().item(),
-            "fall_rate": rollout["next", "terminated"].any(-2).float().mean().item()}
+    fell = rollout["next", "terminated"][..., 0]
+    first_fall = torch.where(fell.any(-1), fell.float().argmax(-1) + 1, torch.full_like(fell[:, 0], steps, dtype=torch.long))
+    return {"speed": rollout["next", "speed"].mean().item(), "fall_rate": fell.any(-1).float().mean().item(),
+            "steps_to_fall": first_fall.float().mean().item()}
 
 
 class _Progress:
     """A tqdm bar on a terminal, else a plain line every ``every`` steps (logs stay readable)."""
 
-    def __init__(self, total: int, initial: int, every: int = 10_000) -> None:
-        self.every, self.last = every, initial
+    def __init__(self, name: str, total: int, initial: int, every: int = 10_000) -> None:
+        self.name, self.every, self.last = name, every, initial
         self.bar = None
         if sys.stderr.isatty():
             from tqdm import tqdm
 
-            self.bar = tqdm(total=total, initial=initial, unit="step", desc="ant locomotion")
+            self.bar = tqdm(total=total, initial=initial, unit="step", desc=name)
         self.total = total
 
     def update(self, done: int, **scalars: float) -> None:
@@ -147,32 +211,47 @@ class _Progress:
             self.bar.set_postfix_str(text)
         elif done - self.last >= self.every or done >= self.total:
             self.last = done
-            print(f"[ant locomotion] {done}/{self.total} steps {text}", flush=True)
+            print(f"[{self.name}] {done}/{self.total} steps {text}", flush=True)
+
+
+#: Fields a continued run may change: the budget, and when and how much it evaluates and saves.
+_BOOKKEEPING = frozenset({"total_steps", "eval_every", "eval_envs", "eval_steps", "checkpoint_minutes"})
+
+
+def _check_same_config(saved: dict[str, Any], config: LocomotionConfig, where: str | Path) -> None:
+    """Refuses to continue a run made with another config (its learning settings, not its bookkeeping)."""
+    defaults = asdict(LocomotionConfig())  # fields added since the run started keep their default
+    changed = sorted(k for k, v in asdict(config).items()
+                     if k not in _BOOKKEEPING and saved.get(k, defaults[k]) != v)
+    if changed:
+        raise ValueError(f"{where} was trained with another config (changed: {changed}); "
+                         "use a new --run-dir or the same settings")
 
 
 def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionConfig(), *,
-                     output: str | Path | None = LOCOMOTION_WEIGHTS) -> dict[str, Any]:
-    """Trains (or resumes) the locomotion policy in ``run_dir``; exports the best body to ``output``.
+                     skill: str | LocomotionSkill = "ant", output: str | Path | None = None,
+                     resume_from: str | Path | None = None) -> dict[str, Any]:
+    """Trains (or resumes) a skill's policy in ``run_dir``; exports the best body to ``output``.
 
-    Returns the final record: steps, updates, best evaluation and the export path. A run
-    directory made with another config is refused (the changed fields are named).
+    ``output`` defaults to the weights shipped for the skill (``skill.weights``). ``resume_from``
+    (a ``resume_state.pt``) starts an empty ``run_dir`` from another machine's run: its
+    networks, optimisers and counters, the buffer refilled by the current policy; a
+    ``run_dir`` that has its own checkpoint ignores it. Returns the final record: steps,
+    updates, best evaluation and the export path. A run directory made with another config
+    is refused (the changed fields are named).
     """
+    skill = SKILLS[skill] if isinstance(skill, str) else skill
+    output = skill.weights if output is None else output
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     config_path = run_dir / _CONFIG
     if config_path.exists():
-        saved = json.loads(config_path.read_text())
-        # The budget may grow (a finished run then continues); everything else fixes the result.
-        changed = sorted(k for k, v in asdict(config).items() if k != "total_steps" and saved.get(k) != v)
-        if changed:
-            raise ValueError(f"{run_dir} was trained with another config (changed: {changed}); "
-                             "use a new --run-dir or the same settings")
-    config_path.write_text(json.dumps(asdict(config), indent=2))
+        _check_same_config(json.loads(config_path.read_text()), config, run_dir)
     torch.manual_seed(config.seed)
 
-    actor = make_locomotion_actor(make_locomotion_network(config.hidden))
-    loss = SACLoss(actor, _make_critic(config.hidden), num_qvalue_nets=2, loss_function="l2",
-                   action_spec=AntLocomotionEnv(batch_size=1).action_spec[0])
+    actor = make_locomotion_actor(skill.network(config.hidden))
+    loss = SACLoss(actor, _make_critic(skill, config.hidden), num_qvalue_nets=2, loss_function="l2",
+                   action_spec=skill.make_env(1, 0).action_spec[0])
     loss.make_value_estimator(gamma=config.gamma)
     target_updater = SoftUpdate(loss, tau=config.tau)
     optimizers = {
@@ -183,16 +262,28 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
     buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(config.buffer_size), batch_size=config.batch_size)
     counters = {"steps": 0, "updates": 0, "update_debt": 0.0, "best_speed": -math.inf, "collect_seed": config.seed}
 
-    checkpoint = run_dir / _CHECKPOINT
-    if checkpoint.exists():
-        state = load_checkpoint(checkpoint)
+    def load_learner(state: dict[str, Any]) -> None:
         loss.load_state_dict(state["loss"])
         for name, optimizer in optimizers.items():
             optimizer.load_state_dict(state["optimizers"][name])
         counters.update(state["counters"])
+
+    checkpoint = run_dir / _CHECKPOINT
+    if checkpoint.exists():
+        state = load_checkpoint(checkpoint)
+        load_learner(state)
         torch.set_rng_state(state["torch_rng"])
         buffer.loads(run_dir / _BUFFER)
-        print(f"[ant locomotion] resumed at {counters['steps']} steps from {checkpoint}", flush=True)
+        print(f"[{skill.name}] resumed at {counters['steps']} steps from {checkpoint}", flush=True)
+    elif resume_from is not None:
+        state = load_checkpoint(Path(resume_from))
+        if state.get("skill") != skill.name:
+            raise ValueError(f"{resume_from} holds a {state.get('skill')!r} skill, not {skill.name!r}")
+        _check_same_config(state["config"], config, resume_from)
+        load_learner(state)
+        print(f"[{skill.name}] resumed at {counters['steps']} steps from {resume_from}; the buffer refills "
+              f"from the current policy ({config.random_steps} steps)", flush=True)
+    config_path.write_text(json.dumps(asdict(config), indent=2))
 
     def save() -> None:
         tmp = run_dir / (_BUFFER + ".tmp")
@@ -204,16 +295,18 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
             (run_dir / _BUFFER).rename(old)
         tmp.rename(run_dir / _BUFFER)
         shutil.rmtree(old, ignore_errors=True)
-        atomic_save({"progress": counters["steps"], "loss": loss.state_dict(), "optimizers": {k: o.state_dict() for k, o in optimizers.items()},
-                     "counters": dict(counters), "torch_rng": torch.get_rng_state()}, checkpoint)
+        learner = {"progress": counters["steps"], "skill": skill.name, "config": asdict(config), "loss": loss.state_dict(),
+                   "optimizers": {k: o.state_dict() for k, o in optimizers.items()}, "counters": dict(counters)}
+        atomic_save({**learner, "torch_rng": torch.get_rng_state()}, checkpoint)
+        atomic_save(learner, run_dir / _RESUME_STATE)
 
     logger = CSVLogger(exp_name="locomotion", log_dir=str(run_dir / "logs"))
     remaining = config.total_steps - counters["steps"]
-    progress = _Progress(config.total_steps, counters["steps"])
+    progress = _Progress(f"{skill.name} locomotion", config.total_steps, counters["steps"])
     if remaining > 0:
         # A resumed run draws fresh episodes from a new seed (env state is not checkpointed).
         counters["collect_seed"] += 1
-        env = AntLocomotionEnv(batch_size=config.num_envs, seed=counters["collect_seed"])
+        env = skill.make_env(config.num_envs, counters["collect_seed"])
         random_left = max(0, config.random_steps - counters["steps"])
         collector = Collector(env, actor, frames_per_batch=config.frames_per_batch,
                               total_frames=math.ceil(remaining / config.frames_per_batch) * config.frames_per_batch,
@@ -224,8 +317,9 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
             buffer.extend(batch.reshape(-1).select(*_TRANSITION_KEYS))
             counters["steps"] += batch.numel()
             metrics: dict[str, float] = {"train_reward": batch["next", "reward"].mean().item()}
-            if counters["steps"] > config.random_steps:
+            if len(buffer) > config.random_steps:
                 counters["update_debt"] += config.updates_per_step * batch.numel()
+                losses = None
                 while counters["update_debt"] >= 1:
                     losses = loss(buffer.sample())
                     total = losses["loss_actor"] + losses["loss_qvalue"] + losses["loss_alpha"]
@@ -237,14 +331,15 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
                     target_updater.step()
                     counters["updates"] += 1
                     counters["update_debt"] -= 1
-                metrics.update(loss_qvalue=losses["loss_qvalue"].item(), alpha=losses["alpha"].item(),
-                               entropy=losses["entropy"].item())
+                if losses is not None:
+                    metrics.update(loss_qvalue=losses["loss_qvalue"].item(), alpha=losses["alpha"].item(),
+                                   entropy=losses["entropy"].item())
             collector.update_policy_weights_()
             steps = counters["steps"]
             if steps % config.eval_every < config.frames_per_batch or steps >= config.total_steps:
                 body = actor.module[0].module[0]
-                result = evaluate_locomotion(body, envs=config.eval_envs, steps=config.eval_steps)
-                metrics.update(eval_speed=result["speed"], eval_fall_rate=result["fall_rate"])
+                result = evaluate_locomotion(body, skill=skill, envs=config.eval_envs, steps=config.eval_steps)
+                metrics.update({f"eval_{name}": value for name, value in result.items()})
                 if result["speed"] > counters["best_speed"]:
                     counters["best_speed"] = result["speed"]
                     atomic_save(body.state_dict(), run_dir / "best_body.pt")
@@ -255,12 +350,14 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
                 last_save = time.monotonic()
             for name, value in metrics.items():
                 logger.log_scalar(name, value, step=steps)
-            progress.update(steps, **{k: v for k, v in metrics.items() if k in ("train_reward", "eval_speed", "alpha")})
+            progress.update(steps, **{k: v for k, v in metrics.items()
+                                      if k in ("train_reward", "eval_speed", "eval_fall_rate", "alpha")})
             if steps >= config.total_steps:
                 break
         collector.shutdown()
         save()
-    record = {"steps": counters["steps"], "updates": counters["updates"], "best_eval_speed": counters["best_speed"]}
+    record = {"skill": skill.name, "steps": counters["steps"], "updates": counters["updates"],
+              "best_eval_speed": counters["best_speed"]}
     if output is not None and (run_dir / "best_body.pt").exists():
         output = Path(output)
         output.parent.mkdir(parents=True, exist_ok=True)
@@ -273,18 +370,27 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--run-dir", default="runs/ant_locomotion", help="checkpoints, buffer and logs (resumed)")
-    parser.add_argument("--steps", type=int, default=LocomotionConfig.total_steps, help="total env steps")
-    parser.add_argument("--utd", type=float, default=LocomotionConfig.updates_per_step,
-                        help="gradient steps per env step (OGBench: 1)")
-    parser.add_argument("--seed", type=int, default=LocomotionConfig.seed)
-    parser.add_argument("--output", default=str(LOCOMOTION_WEIGHTS), help="where the best policy body is exported")
+    parser.add_argument("--skill", choices=sorted(SKILLS), default="ant")
+    parser.add_argument("--run-dir", default=None, help="checkpoints, buffer and logs (resumed); "
+                        "default runs/<skill>_locomotion")
+    parser.add_argument("--resume-from", default=None,
+                        help="a resume_state.pt to start an empty --run-dir from (the buffer refills from the policy)")
+    parser.add_argument("--steps", type=int, default=None, help="total env steps (skill default: ant 400k, humanoid 3M)")
+    parser.add_argument("--utd", type=float, default=None, help="gradient steps per env step (ant 1, humanoid 0.5)")
+    parser.add_argument("--random-steps", type=int, default=None,
+                        help="uniformly random steps of a fresh run; the buffer size at which updates start")
+    parser.add_argument("--eval-every", type=int, default=None, help="env steps between evaluations (and checkpoints)")
+    parser.add_argument("--seed", type=int, default=None)
+    parser.add_argument("--output", default=None, help="where the best policy body is exported "
+                        "(default: the skill's weights in the package)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads (one is fastest on small CPUs)")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
-    record = train_locomotion(args.run_dir, LocomotionConfig(total_steps=args.steps, updates_per_step=args.utd,
-                                                                 seed=args.seed),
-                              output=args.output)
+    skill = SKILLS[args.skill]
+    config = skill.config(total_steps=args.steps, updates_per_step=args.utd, random_steps=args.random_steps,
+                          eval_every=args.eval_every, seed=args.seed)
+    record = train_locomotion(args.run_dir or f"runs/{skill.name}_locomotion", config, skill=skill,
+                              output=args.output, resume_from=args.resume_from)
     print(json.dumps(record))
 
 

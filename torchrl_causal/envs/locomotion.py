@@ -1,0 +1,203 @@
+"""Open-ground directional locomotion: the task the maze experts' walking skills are trained on.
+
+:class:`DirectionalLocomotionEnv` is what the ant's and the humanoid's skill envs share: a batch
+of MuJoCo simulations on open ground, a commanded unit ground-plane direction redrawn every
+``direction_period`` steps (a fixed period, or one drawn uniformly from a range at each redraw),
+the maze suite's :class:`~torchrl_causal.envs.GustProcess` pushing the torso, termination when
+the agent falls, truncation at ``horizon``. Subclasses name the model, the start state, the
+observation and the reward.
+
+Every step also writes ``"speed"``, the torso's ground-plane velocity along the command (m/s),
+and ``"xy"``, the torso position, for evaluation (neither is in the observation).
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+from abc import abstractmethod
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torch import nn
+from torchrl.data import Binary, Bounded, Composite, Unbounded
+from torchrl.envs import EnvBase
+
+from torchrl_causal.envs.base import GustProcess
+from torchrl_causal.envs.mujoco_maze import BatchedSimulation
+
+__all__ = ["DirectionalLocomotionEnv", "load_skill_network", "make_skill_network"]
+
+
+def make_skill_network(observation_dim: int, action_dim: int, hidden: int = 256) -> nn.Module:
+    """A skill's policy body: ``observation -> (pre-tanh mean, log-std)``, each ``action_dim`` wide.
+
+    Two hidden ReLU layers of ``hidden`` units (OGBench's 2 x 256 SAC networks).
+
+    Examples:
+        >>> make_skill_network(69, 21)(torch.zeros(3, 69)).shape
+        torch.Size([3, 42])
+    """
+    return nn.Sequential(
+        nn.Linear(observation_dim, hidden),
+        nn.ReLU(),
+        nn.Linear(hidden, hidden),
+        nn.ReLU(),
+        nn.Linear(hidden, 2 * action_dim),
+    )
+
+
+def load_skill_network(path: str | pathlib.Path, network: nn.Module, *, regenerate: str) -> nn.Module:
+    """``network`` with the state dict at ``path`` (``torch.load(..., weights_only=True)``), in eval mode.
+
+    Raises:
+        FileNotFoundError: naming ``regenerate``, the command that makes the weights.
+        RuntimeError: when the file is not a state dict of ``network``'s architecture.
+    """
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no skill weights at {path}; regenerate them with `{regenerate}`")
+    try:
+        network.load_state_dict(torch.load(path, map_location="cpu", weights_only=True))
+    except Exception as err:  # a truncated file, a foreign pickle or a different architecture
+        raise RuntimeError(f"{path} is not a valid state dict of this skill network: {err}") from err
+    return network.eval()
+
+
+class DirectionalLocomotionEnv(EnvBase):
+    """Base of the skill envs: walk along a commanded direction in open ground, in the gusts.
+
+    ``"observation"`` (``observation_dim``) is the subclass's; a ``"direction"`` entry in the
+    reset tensordict fixes the first commanded directions instead of drawing them.
+
+    Args:
+        simulation: the batched simulations (one dimension of batch).
+        observation_dim: width of ``"observation"``.
+        horizon: steps before truncation.
+        direction_period: steps between direction redraws, or ``(low, high)`` to draw each
+            period uniformly from ``low..high`` (inclusive).
+        gust_process: the pushes (the maze suite's by default; ``GustProcess(probability=0)`` for calm).
+        seed: seed of the env's generator.
+    """
+
+    def __init__(
+        self,
+        simulation: BatchedSimulation,
+        *,
+        observation_dim: int,
+        horizon: int,
+        direction_period: int | tuple[int, int],
+        gust_process: GustProcess | None,
+        seed: int | None,
+    ) -> None:
+        n = simulation.num_envs
+        low, high = (direction_period, direction_period) if isinstance(direction_period, int) else direction_period
+        if horizon < 1 or not 1 <= low <= high:
+            raise ValueError(f"need horizon >= 1 and 1 <= direction_period, got {horizon}, {direction_period!r}")
+        super().__init__(batch_size=torch.Size([n]), device="cpu")
+        self.simulation = simulation
+        self.horizon, self.direction_period = horizon, direction_period
+        self._period_range = (low, high)
+        self.gust_process = GustProcess() if gust_process is None else gust_process
+        self.rng = torch.Generator()
+        self._set_seed(seed)
+        self._direction = torch.zeros(n, 2)
+        self._gust = torch.zeros(n, 2)
+        self._steps = torch.zeros(n, 1, dtype=torch.int64)
+        self._next_redraw = torch.zeros(n, 1, dtype=torch.int64)
+        self.observation_spec = Composite(
+            observation=Unbounded(shape=(n, observation_dim)),
+            direction=Unbounded(shape=(n, 2)),
+            xy=Unbounded(shape=(n, 2)),
+            speed=Unbounded(shape=(n, 1)),
+            shape=(n,),
+        )
+        self.action_spec = Bounded(-1.0, 1.0, shape=(n, simulation.model.nu))
+        self.reward_spec = Unbounded(shape=(n, 1))
+        flag = Binary(n=1, shape=(n, 1), dtype=torch.bool)
+        self.full_done_spec = Composite(done=flag.clone(), terminated=flag.clone(), truncated=flag.clone(), shape=(n,))
+
+    @staticmethod
+    def batch_count(batch_size: int | Sequence[int]) -> int:
+        """The number of simulations of a one-dimensional ``batch_size``; anything else is refused."""
+        shape = (batch_size,) if isinstance(batch_size, int) else tuple(batch_size)
+        if len(shape) != 1 or shape[0] < 1:
+            raise ValueError(f"batch_size must be one positive dimension, got {batch_size!r}")
+        return shape[0]
+
+    # -- subclass hooks ------------------------------------------------------------------
+
+    @abstractmethod
+    def _start_state(self, count: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(qpos, qvel)`` of ``count`` fresh episodes, drawn from :attr:`rng`."""
+
+    @abstractmethod
+    def _read(self, qpos: np.ndarray) -> torch.Tensor:
+        """The observation without the direction, ``(n, observation_dim - 2)``, from the simulations' state
+        (``qpos`` is a fresh copy of their positions)."""
+
+    @abstractmethod
+    def _reward_and_fall(self, speed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(reward, fallen)``, both ``(n, 1)``, after a step with ground-plane ``speed`` along the command."""
+
+    # -- EnvBase ---------------------------------------------------------------------------
+
+    def _set_seed(self, seed: int | None) -> None:
+        self.rng.manual_seed(int(torch.randint(0, 2**62, ()).item()) if seed is None else seed)
+
+    def _draw_directions(self, count: int) -> torch.Tensor:
+        angle = 2 * math.pi * torch.rand(count, generator=self.rng)
+        return torch.stack((angle.cos(), angle.sin()), dim=-1)
+
+    def _draw_periods(self, count: int) -> torch.Tensor:
+        low, high = self._period_range
+        if low == high:  # draws nothing, so a fixed period leaves the random stream alone
+            return torch.full((count, 1), low, dtype=torch.int64)
+        return torch.randint(low, high + 1, (count, 1), generator=self.rng)
+
+    def _observe(self, qpos: np.ndarray, speed: torch.Tensor | None = None) -> TensorDict:
+        return TensorDict(
+            observation=torch.cat((self._read(qpos), self._direction), dim=-1),
+            direction=self._direction.clone(),
+            xy=torch.from_numpy(qpos[:, :2]).float(),
+            speed=torch.zeros(self.batch_size[0], 1) if speed is None else speed,
+            batch_size=self.batch_size,
+        )
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        n = self.batch_size[0]
+        mask = torch.ones(n, dtype=torch.bool)
+        if tensordict is not None and "_reset" in tensordict.keys():
+            mask = tensordict.get("_reset").reshape(n)
+        indices = mask.nonzero().flatten()
+        if len(indices):
+            count = len(indices)
+            self.simulation.reset(indices.numpy(), *self._start_state(count))
+            given = None if tensordict is None else tensordict.get("direction", None)
+            self._direction[indices] = self._draw_directions(count) if given is None else given[indices].float()
+            self._gust[indices] = self.gust_process.draw((count,), generator=self.rng)
+            self._steps[indices] = 0
+            self._next_redraw[indices] = self._draw_periods(count)
+        return self._observe(self.simulation.qpos())
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        before = tensordict.get("xy")
+        ctrl = tensordict.get("action").detach().clamp(-1.0, 1.0).numpy()
+        self.simulation.step(ctrl, self._gust.numpy())
+        qpos = self.simulation.qpos()
+        velocity = (torch.from_numpy(qpos[:, :2]).float() - before) / self.simulation.control_dt
+        speed = (velocity * self._direction).sum(-1, keepdim=True)
+        reward, terminated = self._reward_and_fall(speed)
+        self._steps += 1
+        truncated = self._steps >= self.horizon
+        redraw = (self._steps >= self._next_redraw).flatten()
+        if redraw.any():
+            count = int(redraw.sum())
+            self._direction[redraw] = self._draw_directions(count)
+            self._next_redraw[redraw] = self._steps[redraw] + self._draw_periods(count)
+        self._gust = self.gust_process.advance(self._gust, self._steps, generator=self.rng)
+        out = self._observe(qpos, speed)
+        out.update({"reward": reward, "terminated": terminated, "truncated": truncated, "done": terminated | truncated})
+        return out
