@@ -33,6 +33,8 @@ def test_resume_from_the_small_state_refills_the_buffer_then_updates(tmp_path):
         assert any(key.startswith(part) for key in keys), part
     assert set(state["optimizers"]) == {"actor", "critic", "alpha"} and state["skill"] == "humanoid"
     assert all(state["optimizers"][name]["state"] for name in ("actor", "critic", "alpha"))  # Adam moments kept
+    best = torch.load(tmp_path / "machine_a" / "best_body.pt", weights_only=True)
+    assert all(torch.equal(best[key], state["best_body"][key]) for key in best)  # the best policy travels too
 
     # Machine B: only the small state travels. The policy refills the buffer: 2 batches (200, 400),
     # then updates resume at the 3rd batch (600 > 400): 100 updates per batch of 200 steps.
@@ -42,6 +44,7 @@ def test_resume_from_the_small_state_refills_the_buffer_then_updates(tmp_path):
     resumed = torch.load(tmp_path / "machine_b" / "resume_state.pt", weights_only=True)
     assert resumed["counters"]["collect_seed"] == state["counters"]["collect_seed"] + 1  # fresh episodes
     assert not torch.equal(resumed["loss"]["log_alpha"], state["loss"]["log_alpha"])  # it kept learning
+    assert (tmp_path / "b.pt").exists()  # machine B exports the best body, machine A's if none beat it
     logs = json.loads((tmp_path / "machine_b" / "locomotion_config.json").read_text())
     assert logs["updates_per_step"] == 0.5
 

@@ -16,7 +16,8 @@ Runs resume in two ways:
   states go to ``<run_dir>/checkpoint.pt`` and the replay buffer to ``<run_dir>/buffer`` (both
   atomically); a restarted run continues from them (in-flight episodes restart);
 * across machines: each checkpoint also writes ``<run_dir>/resume_state.pt``, the few MB a run
-  needs without its buffer (actor, critics, target critics, alpha, optimiser states, counters).
+  needs without its buffer (actor, critics, target critics, alpha, optimiser states, counters,
+  the best evaluated policy body).
   ``--resume-from FILE`` starts a fresh run directory from such a file; the buffer refills from
   the current policy (no random actions) before the updates go on.
 
@@ -281,6 +282,8 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
             raise ValueError(f"{resume_from} holds a {state.get('skill')!r} skill, not {skill.name!r}")
         _check_same_config(state["config"], config, resume_from)
         load_learner(state)
+        if "best_body" in state:  # the best policy so far travels with the state
+            atomic_save(state["best_body"], run_dir / "best_body.pt")
         print(f"[{skill.name}] resumed at {counters['steps']} steps from {resume_from}; the buffer refills "
               f"from the current policy ({config.random_steps} steps)", flush=True)
     config_path.write_text(json.dumps(asdict(config), indent=2))
@@ -298,7 +301,9 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
         learner = {"progress": counters["steps"], "skill": skill.name, "config": asdict(config), "loss": loss.state_dict(),
                    "optimizers": {k: o.state_dict() for k, o in optimizers.items()}, "counters": dict(counters)}
         atomic_save({**learner, "torch_rng": torch.get_rng_state()}, checkpoint)
-        atomic_save(learner, run_dir / _RESUME_STATE)
+        best = run_dir / "best_body.pt"
+        best_body = {"best_body": torch.load(best, weights_only=True)} if best.exists() else {}
+        atomic_save({**learner, **best_body}, run_dir / _RESUME_STATE)
 
     logger = CSVLogger(exp_name="locomotion", log_dir=str(run_dir / "logs"))
     remaining = config.total_steps - counters["steps"]
