@@ -27,7 +27,7 @@ import torch
 from torch import nn
 
 from torchrl_causal.envs.base import GustProcess
-from torchrl_causal.envs.locomotion import DirectionalLocomotionEnv, load_skill_network, make_skill_network
+from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv, load_skill_network, make_skill_network
 from torchrl_causal.envs.mujoco_maze import BatchedSimulation
 
 __all__ = [
@@ -125,7 +125,7 @@ class AntLocomotionEnv(DirectionalLocomotionEnv):
     pushes the torso (newtons, redrawn every 5 steps). Episodes terminate when the torso
     leaves ``z in [0.2, 1]`` and are truncated at ``horizon``. Resets add OGBench's noise
     (uniform 0.1 on qpos, N(0, 0.1²) on qvel). The rest is
-    :class:`~torchrl_causal.envs.locomotion.DirectionalLocomotionEnv`'s.
+    :class:`~torchrl_causal.envs.open_ground.DirectionalLocomotionEnv`'s.
 
     Args:
         batch_size: number of independent simulations (one dimension).

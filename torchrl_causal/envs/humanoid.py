@@ -26,7 +26,7 @@ import torch
 from ogbench.online_locomotion.humanoid import tolerance
 
 from torchrl_causal.envs.base import GustProcess
-from torchrl_causal.envs.locomotion import DirectionalLocomotionEnv
+from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv
 from torchrl_causal.envs.mujoco_maze import BatchedSimulation
 
 __all__ = [

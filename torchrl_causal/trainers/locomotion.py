@@ -2,7 +2,7 @@
 
 OGBench generated its maze datasets with goal-direction locomotion policies steered by a
 planner; this trains such a policy (SAC, 2 x 256 MLPs, batch 256, gamma 0.99, tau 0.005,
-uniformly random warm-up steps) on a :class:`~torchrl_causal.envs.locomotion.DirectionalLocomotionEnv`,
+uniformly random warm-up steps) on a :class:`~torchrl_causal.envs.open_ground.DirectionalLocomotionEnv`,
 with TorchRL's :class:`~torchrl.objectives.SACLoss`, :class:`~torchrl.collectors.Collector` and
 :class:`~torchrl.data.TensorDictReplayBuffer`. A :class:`LocomotionSkill` names what differs
 between agents (env, network, default budget, where the weights ship): :data:`SKILLS` has the
@@ -53,7 +53,7 @@ from torchrl.record.loggers.csv import CSVLogger
 
 from torchrl_causal.envs.ant import LOCOMOTION_OBSERVATION_DIM, LOCOMOTION_WEIGHTS, AntLocomotionEnv
 from torchrl_causal.envs.humanoid import HUMANOID_SKILL_OBSERVATION_DIM, HumanoidLocomotionEnv
-from torchrl_causal.envs.locomotion import DirectionalLocomotionEnv, make_skill_network
+from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv, make_skill_network
 from torchrl_causal.trainers.run_directory import atomic_save, load_checkpoint
 
 __all__ = ["SKILLS", "LocomotionConfig", "LocomotionSkill", "evaluate_locomotion", "make_locomotion_actor",
@@ -129,7 +129,7 @@ class LocomotionSkill:
         return replace(LocomotionConfig(), **{**self.defaults, **{k: v for k, v in overrides.items() if v is not None}})
 
     def network(self, hidden: int = 256) -> nn.Module:
-        """A fresh policy body (:func:`~torchrl_causal.envs.locomotion.make_skill_network`)."""
+        """A fresh policy body (:func:`~torchrl_causal.envs.open_ground.make_skill_network`)."""
         return make_skill_network(self.observation_dim, self.action_dim, hidden)
 
 
