@@ -163,3 +163,38 @@ def test_skill_commands_are_redrawn_within_the_period_range():
     changes = [(direction[k, 1:] != direction[k, :-1]).any(-1).nonzero().flatten() for k in range(4)]
     gaps = torch.cat([torch.diff(torch.cat((torch.tensor([-1]), c))) for c in changes])
     assert gaps.min() >= 3 and gaps.max() <= 5 and len(gaps.unique()) > 1
+
+
+# -- the maze expert's wiring (no trained skill ships yet) -------------------------------------
+
+
+def test_maze_expert_steers_the_skill_towards_the_planner_waypoint_and_never_reads_w(tmp_path):
+    from torchrl_causal.envs import HumanoidMazeExpert, MazePlanner
+    from torchrl_causal.envs.open_ground import make_skill_network
+
+    torch.manual_seed(0)
+    skill = make_skill_network(69, 21)
+    torch.save(skill.state_dict(), tmp_path / "skill.pt")
+    env = HumanoidMazeEnv("medium", batch_size=3, seed=4)
+    expert = HumanoidMazeExpert(env, weights=tmp_path / "skill.pt")
+    td = env.reset()
+    action = expert(td.clone())["action"]
+    # independently: OGBench's skill input (its get_ob without xy), then the unit vector to the waypoint
+    reference = _ogbench_medium()
+    planner = MazePlanner(env.layout, env.task.goal_cell, lookahead=3, clearance=1.0)
+    to_waypoint = planner.waypoint(td["P"]) - td["P"]
+    direction = to_waypoint / to_waypoint.norm(dim=-1, keepdim=True)
+    for index, data in enumerate(env.simulator.datas):
+        reference.set_state(data.qpos.copy(), data.qvel.copy())
+        observation = torch.cat((torch.as_tensor(reference.get_ob()[2:], dtype=torch.float32), direction[index]))
+        expected = torch.tanh(skill(observation)[:21])
+        torch.testing.assert_close(action[index], expected, rtol=1e-4, atol=1e-4)
+    shaken = td.clone().set("W", -td["W"])
+    torch.testing.assert_close(expert(shaken)["action"], action, rtol=0, atol=0)  # W plays no part
+
+
+def test_maze_expert_without_trained_weights_names_the_command():
+    from torchrl_causal.envs import HumanoidMazeExpert
+
+    with pytest.raises(FileNotFoundError, match="--skill humanoid"):
+        HumanoidMazeExpert(HumanoidMazeEnv("medium", batch_size=1, seed=0))

@@ -50,6 +50,7 @@ def test_resume_from_the_small_state_refills_the_buffer_then_updates(tmp_path):
 
 
 def test_resume_refuses_another_config_or_skill(tmp_path):
+    # output=None: nothing is exported (the default would overwrite the weights shipped in the package)
     train_locomotion(tmp_path / "a", _config(FRAMES), skill="humanoid", output=None)
     state_file = tmp_path / "a" / "resume_state.pt"
     with pytest.raises(ValueError, match="updates_per_step"):
@@ -57,3 +58,4 @@ def test_resume_refuses_another_config_or_skill(tmp_path):
                          output=None, resume_from=state_file)
     with pytest.raises(ValueError, match="'humanoid' skill, not 'ant'"):
         train_locomotion(tmp_path / "c", _config(2 * FRAMES), skill="ant", output=None, resume_from=state_file)
+    assert not any(tmp_path.rglob("*locomotion.pt")) and not SKILLS["humanoid"].weights.exists()

@@ -20,6 +20,7 @@ _EXPORTS = {
     "GustConfoundedEnv": "base",
     "GustProcess": "base",
     "HumanoidMazeEnv": "humanoidmaze",
+    "HumanoidMazeExpert": "experts",
     "MAZE_MAPS": "planner",
     "MazeLayout": "planner",
     "MazePlanner": "planner",

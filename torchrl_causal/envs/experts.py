@@ -11,10 +11,13 @@ from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.envs.ant import LOCOMOTION_WEIGHTS, load_locomotion_network, locomotion_observation
 from torchrl_causal.envs.antmaze import AntMazeEnv
+from torchrl_causal.envs.humanoid import HUMANOID_LOCOMOTION_WEIGHTS, load_humanoid_locomotion_network
+from torchrl_causal.envs.humanoidmaze import HumanoidMazeEnv
+from torchrl_causal.envs.mujoco_maze import MujocoMazeEnv
 from torchrl_causal.envs.planner import MazePlanner
 from torchrl_causal.envs.rover_maze import RoverMazeEnv, RoverParameters
 
-__all__ = ["AntMazeExpert", "RouteChoiceExpert", "RoverExpert"]
+__all__ = ["AntMazeExpert", "HumanoidMazeExpert", "RouteChoiceExpert", "RoverExpert"]
 
 
 class _ActionNoise:
@@ -103,7 +106,38 @@ class RoverExpert(TensorDictModuleBase):
         return tensordict
 
 
-class AntMazeExpert(TensorDictModuleBase):
+class _PlannedSkillExpert(TensorDictModuleBase):
+    """A maze expert as OGBench built them: planner waypoints steering a walking skill.
+
+    :class:`MazePlanner` (BFS over the maze's cells, the furthest path cell in clear line of
+    sight within ``lookahead`` cells) gives a waypoint; the unit vector from the torso to it is
+    the commanded direction; the skill network turns the agent's variables and that direction
+    into torques (its deterministic action, ``tanh`` of the Gaussian mean). Subclasses name the
+    variables and how the skill reads them (:meth:`_skill_observation`).
+    """
+
+    def __init__(self, env: MujocoMazeEnv, skill: torch.nn.Module, *, action_dim: int, lookahead: int,
+                 clearance: float, noise_std: float, seed: int | None) -> None:
+        super().__init__()
+        self.planner = MazePlanner(env.layout, env.task.goal_cell, lookahead=lookahead, clearance=clearance)
+        self.locomotion = skill.to(env.device)
+        self.action_dim = action_dim
+        self.noise = _ActionNoise(noise_std, seed, env.device)
+
+    def _skill_observation(self, tensordict: TensorDictBase, direction: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+    @torch.no_grad()
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        xy = tensordict.get("P")[..., :2]
+        to_waypoint = self.planner.waypoint(xy) - xy
+        direction = to_waypoint / to_waypoint.norm(dim=-1, keepdim=True).clamp_min(1e-6)
+        mean = self.locomotion(self._skill_observation(tensordict, direction))[..., : self.action_dim]
+        tensordict.set("action", self.noise(torch.tanh(mean)))
+        return tensordict
+
+
+class AntMazeExpert(_PlannedSkillExpert):
     """The Confounded AntMaze expert: planner waypoints steering a trained locomotion skill.
 
     As OGBench built its maze experts: :class:`MazePlanner` (BFS over the maze's cells,
@@ -143,23 +177,54 @@ class AntMazeExpert(TensorDictModuleBase):
         seed: int | None = None,
         weights: str | pathlib.Path = LOCOMOTION_WEIGHTS,
     ) -> None:
-        super().__init__()
         if not isinstance(env, AntMazeEnv):
             raise TypeError(f"AntMazeExpert drives an AntMazeEnv, got {type(env).__name__}")
-        self.planner = MazePlanner(env.layout, env.task.goal_cell, lookahead=lookahead, clearance=clearance)
-        self.locomotion = load_locomotion_network(weights).to(env.device)
-        self.noise = _ActionNoise(noise_std, seed, env.device)
+        super().__init__(env, load_locomotion_network(weights), action_dim=8, lookahead=lookahead,
+                         clearance=clearance, noise_std=noise_std, seed=seed)
 
-    @torch.no_grad()
-    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+    def _skill_observation(self, tensordict: TensorDictBase, direction: torch.Tensor) -> torch.Tensor:
         position = tensordict.get("P")
-        to_waypoint = self.planner.waypoint(position[..., :2]) - position[..., :2]
-        direction = to_waypoint / to_waypoint.norm(dim=-1, keepdim=True).clamp_min(1e-6)
         qpos_tail = torch.cat((position[..., 2:], tensordict.get(("latent", "O")), tensordict.get("A")), dim=-1)
         qvel = torch.cat([tensordict.get(key) for key in ("L", "T", "J")], dim=-1)
-        mean = self.locomotion(locomotion_observation(qpos_tail, qvel, direction))[..., :8]
-        tensordict.set("action", self.noise(torch.tanh(mean)))
-        return tensordict
+        return locomotion_observation(qpos_tail, qvel, direction)
+
+
+class HumanoidMazeExpert(_PlannedSkillExpert):
+    """The Confounded HumanoidMaze expert: planner waypoints steering the humanoid's walking skill.
+
+    The ant's expert with the humanoid's skill (``python -m torchrl_causal.trainers.locomotion
+    --skill humanoid``, exported to :data:`~torchrl_causal.envs.humanoid.HUMANOID_LOCOMOTION_WEIGHTS`):
+    the skill reads the expert's variables A, H, E, V, the centre-of-mass velocity
+    ``("latent", "C")`` and J, with the commanded direction (OGBench's skill observation), never
+    the vibration sensor ``W``. No trained weights ship yet: the default path is refused with
+    the command that makes them.
+
+    Args:
+        env: the :class:`~torchrl_causal.envs.HumanoidMazeEnv` to solve.
+        lookahead / clearance / noise_std / seed: as :class:`AntMazeExpert`'s.
+        weights: path of the skill's state dict.
+    """
+
+    in_keys = ["P", "A", "H", "E", "V", ("latent", "C"), "J"]
+    out_keys = ["action"]
+
+    def __init__(
+        self,
+        env: HumanoidMazeEnv,
+        *,
+        lookahead: int = 3,
+        clearance: float = 1.0,
+        noise_std: float = 0.0,
+        seed: int | None = None,
+        weights: str | pathlib.Path = HUMANOID_LOCOMOTION_WEIGHTS,
+    ) -> None:
+        if not isinstance(env, HumanoidMazeEnv):
+            raise TypeError(f"HumanoidMazeExpert drives a HumanoidMazeEnv, got {type(env).__name__}")
+        super().__init__(env, load_humanoid_locomotion_network(weights), action_dim=21, lookahead=lookahead,
+                         clearance=clearance, noise_std=noise_std, seed=seed)
+
+    def _skill_observation(self, tensordict: TensorDictBase, direction: torch.Tensor) -> torch.Tensor:
+        return torch.cat([tensordict.get(key) for key in self.in_keys[1:]] + [direction], dim=-1)
 
 
 class RouteChoiceExpert(TensorDictModuleBase):

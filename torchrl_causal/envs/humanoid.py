@@ -26,16 +26,18 @@ import torch
 from ogbench.online_locomotion.humanoid import tolerance
 
 from torchrl_causal.envs.base import GustProcess
-from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv
+from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv, load_skill_network, make_skill_network
 from torchrl_causal.envs.mujoco_maze import BatchedSimulation
 
 __all__ = [
     "HUMANOID_COLUMNS",
+    "HUMANOID_LOCOMOTION_WEIGHTS",
     "HUMANOID_SKILL_OBSERVATION_DIM",
     "HUMANOID_SKILL_VARIABLES",
     "HumanoidLocomotionEnv",
     "START_QPOS_NOISE",
     "START_QVEL_NOISE",
+    "load_humanoid_locomotion_network",
     "stand_reward",
     "HUMANOID_EXTREMITIES",
     "HUMANOID_FRAME_SKIP",
@@ -149,6 +151,19 @@ def standing_qpos(model: mujoco.MjModel, yaw: np.ndarray, *, clearance: float = 
 HUMANOID_SKILL_VARIABLES = ("A", "H", "E", "V", "C", "J")
 #: The skill's observation: those 67 dims and the commanded unit direction (2).
 HUMANOID_SKILL_OBSERVATION_DIM = 67 + 2
+#: Where the package ships the trained skill's policy body (none yet: issue 38's long run makes it).
+HUMANOID_LOCOMOTION_WEIGHTS = pathlib.Path(__file__).parent / "assets" / "humanoid_locomotion.pt"
+
+
+def load_humanoid_locomotion_network(path: str | pathlib.Path = HUMANOID_LOCOMOTION_WEIGHTS) -> torch.nn.Module:
+    """The humanoid skill's 2 x 256 policy body (69 -> 2 x 21) with trained weights, in eval mode.
+
+    Raises:
+        FileNotFoundError: naming the command that makes the weights.
+    """
+    return load_skill_network(path, make_skill_network(HUMANOID_SKILL_OBSERVATION_DIM, 21), regenerate=(
+        "python -m torchrl_causal.trainers.locomotion --skill humanoid (~7-10 CPU-hours over several sittings; "
+        "results/humanoid_locomotion/README.md)"))
 _SKILL_COLUMNS = np.concatenate([np.arange(HUMANOID_STATE_WIDTH)[HUMANOID_COLUMNS[v]] for v in HUMANOID_SKILL_VARIABLES])
 
 

@@ -52,11 +52,15 @@ from torchrl.objectives import SACLoss, SoftUpdate
 from torchrl.record.loggers.csv import CSVLogger
 
 from torchrl_causal.envs.ant import LOCOMOTION_OBSERVATION_DIM, LOCOMOTION_WEIGHTS, AntLocomotionEnv
-from torchrl_causal.envs.humanoid import HUMANOID_SKILL_OBSERVATION_DIM, HumanoidLocomotionEnv
+from torchrl_causal.envs.humanoid import (
+    HUMANOID_LOCOMOTION_WEIGHTS,
+    HUMANOID_SKILL_OBSERVATION_DIM,
+    HumanoidLocomotionEnv,
+)
 from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv, make_skill_network
 from torchrl_causal.trainers.run_directory import atomic_save, load_checkpoint
 
-__all__ = ["SKILLS", "LocomotionConfig", "LocomotionSkill", "evaluate_locomotion", "make_locomotion_actor",
+__all__ = ["SKILLS", "SKILL_WEIGHTS", "LocomotionConfig", "LocomotionSkill", "evaluate_locomotion", "make_locomotion_actor",
            "train_locomotion"]
 
 _CHECKPOINT = "checkpoint.pt"
@@ -139,7 +143,7 @@ SKILLS: dict[str, LocomotionSkill] = {
                            LOCOMOTION_OBSERVATION_DIM, 8, LOCOMOTION_WEIGHTS),
     "humanoid": LocomotionSkill(
         "humanoid", lambda n, seed: HumanoidLocomotionEnv(batch_size=n, seed=seed), HUMANOID_SKILL_OBSERVATION_DIM,
-        21, LOCOMOTION_WEIGHTS.with_name("humanoid_locomotion.pt"),
+        21, HUMANOID_LOCOMOTION_WEIGHTS,
         defaults={"total_steps": 3_000_000, "buffer_size": 1_000_000, "updates_per_step": 0.5, "num_envs": 8,
                   "eval_every": 50_000, "eval_steps": 400}),
 }
@@ -229,12 +233,17 @@ def _check_same_config(saved: dict[str, Any], config: LocomotionConfig, where: s
                          "use a new --run-dir or the same settings")
 
 
+#: ``train_locomotion``'s default ``output``: the weights the package ships for the skill.
+SKILL_WEIGHTS = Path("<the skill's shipped weights>")
+
+
 def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionConfig(), *,
-                     skill: str | LocomotionSkill = "ant", output: str | Path | None = None,
+                     skill: str | LocomotionSkill = "ant", output: str | Path | None = SKILL_WEIGHTS,
                      resume_from: str | Path | None = None) -> dict[str, Any]:
     """Trains (or resumes) a skill's policy in ``run_dir``; exports the best body to ``output``.
 
-    ``output`` defaults to the weights shipped for the skill (``skill.weights``). ``resume_from``
+    ``output`` defaults to the weights shipped for the skill (``skill.weights``); ``None``
+    exports nothing. ``resume_from``
     (a ``resume_state.pt``) starts an empty ``run_dir`` from another machine's run: its
     networks, optimisers and counters, the buffer refilled by the current policy; a
     ``run_dir`` that has its own checkpoint ignores it. Returns the final record: steps,
@@ -242,7 +251,7 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
     is refused (the changed fields are named).
     """
     skill = SKILLS[skill] if isinstance(skill, str) else skill
-    output = skill.weights if output is None else output
+    output = skill.weights if output == SKILL_WEIGHTS else output
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     config_path = run_dir / _CONFIG
@@ -395,7 +404,7 @@ def main(argv: list[str] | None = None) -> None:
     config = skill.config(total_steps=args.steps, updates_per_step=args.utd, random_steps=args.random_steps,
                           eval_every=args.eval_every, seed=args.seed)
     record = train_locomotion(args.run_dir or f"runs/{skill.name}_locomotion", config, skill=skill,
-                              output=args.output, resume_from=args.resume_from)
+                              output=args.output or SKILL_WEIGHTS, resume_from=args.resume_from)
     print(json.dumps(record))
 
 
