@@ -16,7 +16,7 @@ import argparse
 import torch
 from tensordict.nn import InteractionType, set_interaction_type
 
-from torchrl_causal.evaluate import open_run
+from torchrl_causal.lifecycle import open_run
 
 
 def classify(run_dir: str, regime: str, episodes: int, seed: int, flip_height: float) -> dict[str, float]:

@@ -27,8 +27,8 @@ def _train(root: Path, *overrides: str, **kwargs) -> subprocess.Popen:
 
 
 def test_an_out_of_range_value_stops_with_one_line_and_no_run_directory(tmp_path: Path) -> None:
-    from torchrl_causal.train import main
-    from torchrl_causal.trainers import compose_config
+    from torchrl_causal.cli.train import main
+    from torchrl_causal.experiment import compose_config
 
     root = tmp_path / "runs"
     cfg = compose_config([f"run_root={root}", *TINY, "eval.final_episodes=0"])

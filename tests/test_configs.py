@@ -16,7 +16,8 @@ from hydra.utils import get_class, get_object, instantiate
 from omegaconf import OmegaConf
 from omegaconf.errors import InterpolationResolutionError
 
-from torchrl_causal.trainers import CONFIG_DIR, ConfigValueError, Trainer, compose_config, run_label, validate_config
+from torchrl_causal.experiment import CONFIG_DIR, ConfigValueError, compose_config, run_label, validate_config
+from torchrl_causal.trainers import Trainer
 
 ENVS = ("rovermaze_u", "rovermaze_medium", "rovermaze_large", "route_choice",
         "antmaze_medium", "antmaze_large", "humanoidmaze_medium", "humanoidmaze_large")
@@ -212,7 +213,7 @@ def test_overrides_reach_env_window_and_run_dir() -> None:
                           "env.horizon=500", "env.confounding_strength=0.5"])
     assert cfg.run_name == "rovermaze_large/h500-cs0.5-k2/c_iq_learn/seed1"
     assert "h500-cs0.5" in cfg.demos.path
-    from torchrl_causal.trainers.builders import make_env
+    from torchrl_causal.experiment.builders import make_env
 
     env = make_env(cfg, "deploy", 2, 0)
     assert (env.horizon, env.confounding_strength, env.regime, env.maze) == (500, 0.5, "deploy", "large")
@@ -222,7 +223,7 @@ def test_overrides_reach_env_window_and_run_dir() -> None:
         compose_config(["window=matched", "causal=true"]).run_name
     no_action = compose_config(["window.drop=[X]"])
     assert no_action.run_name == "rovermaze_medium/h1000-cs1.0-k10/c_sqil_no-X/seed0"
-    from torchrl_causal.trainers.builders import make_window
+    from torchrl_causal.experiment.builders import make_window
 
     assert "X" in make_window(compose_config([])).lags and "X" not in make_window(no_action).lags
     with pytest.raises(ValueError, match="cannot drop"):
@@ -275,7 +276,7 @@ def test_entry_point_composes_from_any_directory(tmp_path) -> None:
 
 
 def test_the_demo_runs_validate(tmp_path) -> None:
-    from torchrl_causal.demo import DEMO_RUNS, demo_overrides
+    from torchrl_causal.cli.demo import DEMO_RUNS, demo_overrides
 
     # the main job shows the paper's method against its twin, and BC against C-BC
     assert {("sqil", True), ("sqil", False), ("bc", True), ("bc", False)} <= set(DEMO_RUNS)

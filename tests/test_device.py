@@ -27,10 +27,11 @@ from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.runs import read_scalar_csv
 from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
 from torchrl_causal.objectives import IQLearnLoss
-from torchrl_causal.train import run
-from torchrl_causal.trainers import Trainer, compose_config
-from torchrl_causal.trainers.device import PolicyOnDevice, compile_unavailable, for_cpu_env, resolve_device
-from torchrl_causal.trainers.schema import ConfigValueError, validate_config
+from torchrl_causal.lifecycle import run
+from torchrl_causal.experiment import compose_config
+from torchrl_causal.trainers import Trainer
+from torchrl_causal.experiment.device import PolicyOnDevice, compile_unavailable, for_cpu_env, resolve_device
+from torchrl_causal.experiment.schema import ConfigValueError, validate_config
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
 DEVICES = ["cpu", *(["cuda"] if torch.cuda.is_available() else [])]
@@ -330,7 +331,7 @@ def test_multi_process_collection_uses_the_current_policy(tmp_path: Path) -> Non
 def test_a_run_from_a_missing_device_evaluates_on_the_cpu(tmp_path: Path) -> None:
     from omegaconf import OmegaConf
 
-    from torchrl_causal.evaluate import evaluate_run
+    from torchrl_causal.lifecycle import evaluate_run
 
     cfg = tiny_config(tmp_path, "route_choice", "bc", True)
     run(cfg)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from torchrl_causal.envs import AntMazeEnv, AntMazeExpert, RoverMazeEnv
-from torchrl_causal.evaluation.filmstrip import record_filmstrip, save_filmstrips
+from torchrl_causal.evaluation.rendering import record_filmstrip, save_filmstrips
 
 SIZE = 48
 
@@ -51,9 +51,9 @@ def test_refuses_batches_and_envs_that_cannot_render():
 
 
 def test_cli_draws_one_row_per_run_from_the_same_start(tmp_path, capsys):
-    from torchrl_causal.filmstrip import filmstrip_of_run, main
-    from torchrl_causal.train import run
-    from torchrl_causal.trainers import compose_config
+    from torchrl_causal.cli.filmstrip import filmstrip_of_run, main
+    from torchrl_causal.lifecycle import run
+    from torchrl_causal.experiment import compose_config
 
     tiny = ["env=antmaze_medium", "env.horizon=30", "window.k=2", f"run_root={tmp_path}", "progress_bar=false",
             "demos.episodes=2", "eval.episodes=1", "eval.num_envs=1", "eval.final_episodes=1"]

@@ -15,7 +15,7 @@ import torch
 
 from test_trainers import ALGO_TINY, TINY
 from torchrl_causal.evaluation import load_runs
-from torchrl_causal.trainers import load_checkpoint
+from torchrl_causal.experiment import load_checkpoint
 
 pytest.importorskip("hydra_plugins.hydra_submitit_launcher",
                     reason="hydra-submitit-launcher is not installed: pip install 'torchrl-causal[cluster]'")

@@ -11,7 +11,7 @@ import json
 import pytest
 import torch
 
-from torchrl_causal.trainers.locomotion import SKILLS, train_locomotion
+from torchrl_causal.envs.locomotion import SKILLS, train_locomotion
 
 FRAMES = 200  # LocomotionConfig.frames_per_batch
 

@@ -8,12 +8,12 @@ from pathlib import Path
 import pytest
 import torch
 
-import torchrl_causal.strength_ablation as ablation
-from torchrl_causal.evaluate import evaluate_run
-from torchrl_causal.evaluation.report import NOTES_BEGIN, NOTES_END
+import torchrl_causal.cli.strength_ablation as ablation
+from torchrl_causal.lifecycle import evaluate_run
+from torchrl_causal.evaluation.reporting import NOTES_BEGIN, NOTES_END
 from torchrl_causal.evaluation.runs import archive_runs
-from torchrl_causal.train import run
-from torchrl_causal.trainers import compose_config
+from torchrl_causal.lifecycle import run
+from torchrl_causal.experiment import compose_config
 
 EPISODES = 8
 TINY_BC = ["env=rovermaze_u", "env.horizon=40", "window.k=2", "algo=bc", "progress_bar=false", "threads=1",
@@ -50,7 +50,7 @@ def _refuse_evaluation(monkeypatch) -> None:
     def evaluate_again(*args, **kwargs):
         raise AssertionError("re-evaluated a stored record")
 
-    monkeypatch.setattr("torchrl_causal.evaluate.open_run", evaluate_again)
+    monkeypatch.setattr("torchrl_causal.lifecycle.open_run", evaluate_again)
 
 
 def test_stored_records_are_read_back_not_evaluated_again(runs_root: Path, monkeypatch) -> None:

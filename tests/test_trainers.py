@@ -23,19 +23,19 @@ from torchrl_causal.evaluation import load_runs, write_report
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.runs import read_scalar_csv
 from torchrl_causal.graphs.window import AdjustmentWindow
-from torchrl_causal.train import run
-from torchrl_causal.trainers import (
+from torchrl_causal.experiment import (
     CheckpointError,
     ConfigMismatchError,
     ConfigValueError,
     RunDirectory,
     RunInterrupted,
     RunInUseError,
-    Trainer,
     compose_config,
     load_checkpoint,
 )
-from torchrl_causal.trainers.builders import make_window
+from torchrl_causal.experiment.builders import make_window
+from torchrl_causal.lifecycle import run
+from torchrl_causal.trainers import Trainer
 
 TINY = [
     "progress_bar=false", "threads=1", "demos.episodes=6", "eval.episodes=4", "eval.num_envs=4",
@@ -61,7 +61,7 @@ def tiny_config(root: Path, env: str, algo: str, causal: bool, *extra: str):
 
 
 def build_trainer(cfg) -> Trainer:
-    """The trainer :func:`~torchrl_causal.train.run` builds for ``cfg``, not yet set up,
+    """The trainer :func:`~torchrl_causal.lifecycle.run` builds for ``cfg``, not yet set up,
     for tests that look inside it (``fit()`` writes to ``cfg.run_dir``)."""
     window = make_window(cfg)
     return get_class(cfg.algo.trainer)(cfg, RunDirectory(cfg.run_dir), window, Evaluator(cfg, window).periodic)
@@ -189,7 +189,7 @@ def test_a_run_held_by_another_process_is_refused_and_a_killed_holder_leaves_no_
     run_dir = Path(cfg.run_dir)
     holder = subprocess.Popen(
         [sys.executable, "-c", "import sys, time\n"
-         "from torchrl_causal.trainers import RunDirectory\n"
+         "from torchrl_causal.experiment import RunDirectory\n"
          "with RunDirectory(sys.argv[1]).lock():\n"
          "    print('held', flush=True)\n"
          "    time.sleep(600)\n", str(run_dir)],
@@ -210,7 +210,7 @@ def test_a_killed_run_reads_as_killed_not_running(tmp_path: Path) -> None:
     run_dir = RunDirectory(tmp_path / "run")
     holder = subprocess.Popen(
         [sys.executable, "-c", "import sys, time\n"
-         "from torchrl_causal.trainers import RunDirectory\n"
+         "from torchrl_causal.experiment import RunDirectory\n"
          "run = RunDirectory(sys.argv[1])\n"
          "with run.lock():\n"
          "    run.write_status('running', progress=7)\n"
@@ -242,12 +242,12 @@ def test_out_of_range_values_fail_before_a_run_directory_exists(tmp_path: Path, 
             run(tiny_config(tmp_path, "rovermaze_u", "sqil", True, change))
     assert not (tmp_path / "rovermaze_u").exists()
     # A failure after the directory was claimed but before any checkpoint leaves nothing either.
-    import torchrl_causal.train as train_module
+    import torchrl_causal.lifecycle as lifecycle
 
     def broken_window(cfg):
         raise RuntimeError("no window")
 
-    monkeypatch.setattr(train_module, "make_window", broken_window)
+    monkeypatch.setattr(lifecycle, "make_window", broken_window)
     with pytest.raises(RuntimeError, match="no window"):
         run(tiny_config(tmp_path, "rovermaze_u", "sqil", True))
     assert not (tmp_path / "rovermaze_u").exists()
@@ -430,7 +430,7 @@ def test_route_choice_bc_reproduces_the_appendix_values(tmp_path: Path) -> None:
 
 
 def test_evaluate_cli_writes_its_own_record(trained_runs, torch_threads) -> None:
-    from torchrl_causal.evaluate import main as evaluate_main
+    from torchrl_causal.cli.evaluate import main as evaluate_main
 
     root = trained_runs["rovermaze_u"]
     for label in ("c_sqil", "expert"):
@@ -453,7 +453,7 @@ def test_evaluate_cli_writes_its_own_record(trained_runs, torch_threads) -> None
 
 
 def test_successful_only_trains_on_the_successful_episodes_of_the_same_set(tmp_path: Path, caplog) -> None:
-    from torchrl_causal.trainers.builders import load_or_collect_demonstrations
+    from torchrl_causal.experiment.builders import load_or_collect_demonstrations
 
     # A 198-step horizon truncates some of the rover expert's 188-201-step episodes.
     every = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "env.horizon=198", "demos.episodes=12")

@@ -33,8 +33,8 @@ from pathlib import Path
 
 from torchrl_causal.evaluation import aggregate, effect_checks, load_runs, write_report
 from torchrl_causal.evaluation.tables import effect_markdown, lengths_markdown, raw_markdown, table1_markdown
-from torchrl_causal.train import run
-from torchrl_causal.trainers import RunInterrupted, compose_config
+from torchrl_causal.lifecycle import run
+from torchrl_causal.experiment import RunInterrupted, compose_config
 
 __all__ = ["main", "demo_overrides", "DEMO_SETTINGS", "DEMO_ALGOS", "DEMO_RUNS"]
 

@@ -17,8 +17,8 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from torchrl_causal.evaluate import open_run
-from torchrl_causal.evaluation.filmstrip import Filmstrip, record_filmstrip, save_filmstrips
+from torchrl_causal.lifecycle import open_run
+from torchrl_causal.evaluation.rendering import Filmstrip, record_filmstrip, save_filmstrips
 
 __all__ = ["filmstrip_of_run", "main"]
 

@@ -19,7 +19,7 @@ from collections.abc import Sequence
 
 from omegaconf import OmegaConf
 
-from torchrl_causal.evaluation.report import write_report
+from torchrl_causal.evaluation.reporting import write_report
 from torchrl_causal.evaluation.tables import EffectTargets
 
 

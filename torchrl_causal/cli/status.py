@@ -13,7 +13,7 @@ after its budget was raised still holds the evaluations of the earlier budget.
 
 Examples:
     >>> import tempfile
-    >>> from torchrl_causal.trainers import RunDirectory
+    >>> from torchrl_causal.experiment import RunDirectory
     >>> root = tempfile.mkdtemp()
     >>> run = RunDirectory(f"{root}/rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0")
     >>> run.path.mkdir(parents=True)
@@ -38,8 +38,8 @@ from typing import Any
 from omegaconf import OmegaConf
 
 from torchrl_causal.evaluation.metrics import EvaluationResult
-from torchrl_causal.trainers.provenance import RUNTIME_FIELDS, identity_changes
-from torchrl_causal.trainers.run_directory import CONFIG_FILE, RunDirectory
+from torchrl_causal.experiment.provenance import RUNTIME_FIELDS, identity_changes
+from torchrl_causal.experiment.run_directory import CONFIG_FILE, RunDirectory
 
 __all__ = ["run_statuses", "status_markdown", "main"]
 

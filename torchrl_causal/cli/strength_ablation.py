@@ -6,7 +6,7 @@ The strength only sets how far the deployment regime shifts the confounded senso
 (the compass is rotated by ``strength * pi``); training never sees it. So the ablation is
 an evaluation, not new training: every run below ``runs`` (its selected policy,
 ``checkpoints/best.pt``) is evaluated in the deploy regime at each strength with
-:func:`~torchrl_causal.evaluate.evaluate_run`, which keeps each record in
+:func:`~torchrl_causal.lifecycle.evaluate_run`, which keeps each record in
 ``<run_dir>/eval/deploy-n<episodes>-seed<seed>-envs<n>-cs<strength>.json``. A record that
 already exists with the same settings is read back instead of evaluated again, so an
 interrupted ablation resumes and a finished one rewrites its report in seconds, and an
@@ -32,12 +32,12 @@ from pathlib import Path
 import torch
 from omegaconf import OmegaConf
 
-from torchrl_causal.evaluate import DEFAULT_THREADS, evaluate_run
+from torchrl_causal.lifecycle import DEFAULT_THREADS, evaluate_run
 from torchrl_causal.evaluation.plots import plot_ablation
-from torchrl_causal.evaluation.report import kept_notes
+from torchrl_causal.evaluation.reporting import kept_notes
 from torchrl_causal.evaluation.runs import RunRecord, load_runs
 from torchrl_causal.evaluation.tables import aggregate, display_name, ordered_labels
-from torchrl_causal.trainers import CheckpointError
+from torchrl_causal.experiment import CheckpointError
 
 __all__ = ["PAPER_STRENGTHS", "strength_ablation", "strength_markdown", "main"]
 
@@ -112,7 +112,7 @@ def main(argv: Sequence[str] | None = None) -> Path:
                          + (f"; unknown argument(s) {sorted(unknown)}" if unknown else ""))
     strengths = [float(s) for s in args.get("strengths", PAPER_STRENGTHS)]
     episodes, seed = int(args.get("episodes", 1000)), int(args.get("seed", 30_000))
-    torch.set_num_threads(int(args.get("threads", DEFAULT_THREADS)))  # see torchrl_causal.evaluate
+    torch.set_num_threads(int(args.get("threads", DEFAULT_THREADS)))  # see torchrl_causal.lifecycle
     records = strength_ablation(args.runs, strengths, episodes, seed)
     out = Path(args.get("out", Path(args.runs) / "report"))
     out.mkdir(parents=True, exist_ok=True)

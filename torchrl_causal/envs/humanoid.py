@@ -162,7 +162,7 @@ def load_humanoid_locomotion_network(path: str | pathlib.Path = HUMANOID_LOCOMOT
         FileNotFoundError: naming the command that makes the weights.
     """
     return load_skill_network(path, make_skill_network(HUMANOID_SKILL_OBSERVATION_DIM, 21), regenerate=(
-        "python -m torchrl_causal.trainers.locomotion --skill humanoid (~7-10 CPU-hours over several sittings; "
+        "python -m torchrl_causal.envs.locomotion --skill humanoid (~7-10 CPU-hours over several sittings; "
         "results/humanoid_locomotion/README.md)"))
 _SKILL_COLUMNS = np.concatenate([np.arange(HUMANOID_STATE_WIDTH)[HUMANOID_COLUMNS[v]] for v in HUMANOID_SKILL_VARIABLES])
 

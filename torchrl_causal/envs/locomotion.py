@@ -24,8 +24,8 @@ Runs resume in two ways:
 The best evaluation's policy body is exported to ``--output`` (by default the weights shipped
 in the package for that skill)::
 
-    python -m torchrl_causal.trainers.locomotion --skill ant --run-dir runs/ant_locomotion
-    python -m torchrl_causal.trainers.locomotion --skill humanoid --run-dir runs/humanoid_locomotion
+    python -m torchrl_causal.envs.locomotion --skill ant --run-dir runs/ant_locomotion
+    python -m torchrl_causal.envs.locomotion --skill humanoid --run-dir runs/humanoid_locomotion
 """
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ from torchrl_causal.envs.humanoid import (
     HumanoidLocomotionEnv,
 )
 from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv, make_skill_network
-from torchrl_causal.trainers.run_directory import atomic_save, load_checkpoint
+from torchrl_causal.experiment.run_directory import atomic_save, load_checkpoint
 
 __all__ = ["SKILLS", "SKILL_WEIGHTS", "LocomotionConfig", "LocomotionSkill", "evaluate_locomotion", "make_locomotion_actor",
            "train_locomotion"]

@@ -8,7 +8,7 @@
 """
 
 from torchrl_causal.evaluation.metrics import EvaluationResult, evaluate_policy
-from torchrl_causal.evaluation.report import Report, write_report
+from torchrl_causal.evaluation.reporting import Report, write_report
 from torchrl_causal.evaluation.runs import RunRecord, Setting, eval_path, load_run, load_runs
 from torchrl_causal.evaluation.tables import (
     CSV_COLUMNS,

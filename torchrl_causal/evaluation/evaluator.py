@@ -19,9 +19,9 @@ from torchrl.envs import EnvBase
 
 from torchrl_causal.evaluation.metrics import EvaluationResult, Policy, evaluate_policy
 from torchrl_causal.graphs.window import AdjustmentWindow
-from torchrl_causal.trainers.builders import make_env, make_expert, make_imitator_env, make_policy
-from torchrl_causal.trainers.device import for_cpu_env, resolve_device
-from torchrl_causal.trainers.run_directory import CheckpointError, RunDirectory
+from torchrl_causal.experiment.builders import make_env, make_expert, make_imitator_env, make_policy
+from torchrl_causal.experiment.device import for_cpu_env, resolve_device
+from torchrl_causal.experiment.run_directory import CheckpointError, RunDirectory
 
 __all__ = ["Evaluator", "maze_geometry", "PERIODIC_EVAL_SEED", "FINAL_EVAL_SEED"]
 
@@ -87,7 +87,7 @@ class Evaluator:
 
         ``policy=None`` evaluates the env's expert, built for each evaluation env (it
         reads that env's latent state). A policy whose parameters live off the CPU acts
-        through :func:`~torchrl_causal.trainers.device.for_cpu_env` (the env steps on the CPU).
+        through :func:`~torchrl_causal.experiment.device.for_cpu_env` (the env steps on the CPU).
         """
         env = self.make_env(regime, min(num_envs or self.cfg.eval.num_envs, episodes), seed)
         acting = self.acting_policy(policy, env)

@@ -21,7 +21,7 @@ from typing import Any, NamedTuple
 from omegaconf import OmegaConf
 
 from torchrl_causal.evaluation.metrics import EvaluationResult
-from torchrl_causal.trainers.run_directory import CONFIG_FILE, RunDirectory, atomic_write_text, run_label
+from torchrl_causal.experiment.run_directory import CONFIG_FILE, RunDirectory, atomic_write_text, run_label
 
 log = logging.getLogger(__name__)
 
@@ -190,7 +190,7 @@ def archive_runs(root: str | Path, out: str | Path) -> list[Path]:
 
     Examples:
         >>> import tempfile, pathlib
-        >>> from torchrl_causal.trainers import RunDirectory
+        >>> from torchrl_causal.experiment import RunDirectory
         >>> root, out = (pathlib.Path(tempfile.mkdtemp()) for _ in range(2))
         >>> run = RunDirectory(root / "rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0")
         >>> run.path.mkdir(parents=True)

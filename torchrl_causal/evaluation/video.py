@@ -18,7 +18,7 @@ from tensordict import TensorDict
 from torchrl.envs import EnvBase
 from torchrl.record import VideoRecorder
 
-from torchrl_causal.evaluation.filmstrip import EpisodeOutcome, rendered_episode
+from torchrl_causal.evaluation.rendering import EpisodeOutcome, rendered_episode
 from torchrl_causal.evaluation.metrics import Policy
 
 __all__ = ["VIDEO_FORMATS", "VideoFile", "RecordedVideo", "record_video"]
@@ -101,7 +101,7 @@ def record_video(env: EnvBase, policy: Policy, path: str | Path, *, max_steps: i
     """Records one episode of ``policy`` in ``env`` to ``path`` (``.mp4`` or ``.gif``).
 
     The frames (the render after reset, after every ``every``-th step and after the last;
-    see :func:`~torchrl_causal.evaluation.filmstrip.rendered_episode`) pass through
+    see :func:`~torchrl_causal.evaluation.rendering.rendered_episode`) pass through
     TorchRL's :class:`~torchrl.record.VideoRecorder` into a :class:`VideoFile`.
 
     Examples:

@@ -22,7 +22,7 @@ from torchrl.data import Binary, Bounded, Composite, TensorSpec
 from torchrl.envs import EnvBase, Transform, TransformedEnv
 
 from torchrl_causal.graphs.window import AdjustmentWindow
-from torchrl_causal.trainers.schema import WindowMode
+from torchrl_causal.experiment.schema import WindowMode
 from torchrl_causal.transforms import CausalWindowTransform
 
 __all__ = [

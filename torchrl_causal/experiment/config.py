@@ -1,11 +1,11 @@
 """Where the Hydra config tree lives, its resolvers and schemas, and composing it.
 
-The tree sits in ``configs/`` at the repository root, next to the package, so
-``python -m torchrl_causal.train`` finds it from any working directory. Its groups are
-typed by the structured configs of :mod:`torchrl_causal.trainers.schema`.
+The tree is package data, ``torchrl_causal/conf/``, so ``python -m torchrl_causal.train``
+finds it from any working directory, in a checkout or an installed wheel. Its groups are
+typed by the structured configs of :mod:`torchrl_causal.experiment.schema`.
 
 Examples:
-    >>> from torchrl_causal.trainers.config import compose_config
+    >>> from torchrl_causal.experiment.config import compose_config
     >>> cfg = compose_config(["env=rovermaze_u", "algo=sqil", "causal=false", "seed=3"])
     >>> cfg.algo.name, cfg.causal, cfg.seed
     ('sqil', False, 3)
@@ -24,12 +24,12 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from torchrl_causal.trainers.run_directory import run_label
-from torchrl_causal.trainers.schema import register_configs
+from torchrl_causal.experiment.run_directory import run_label
+from torchrl_causal.experiment.schema import register_configs
 
 __all__ = ["CONFIG_DIR", "CONFIG_NAME", "register_resolvers", "compose_config"]
 
-CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "conf"
 CONFIG_NAME = "config"
 
 
@@ -41,13 +41,12 @@ def register_resolvers() -> None:
 
 
 def compose_config(overrides: Sequence[str] = ()) -> DictConfig:
-    """Composes ``configs/config.yaml`` with command-line style ``overrides`` (no run).
+    """Composes ``conf/config.yaml`` with command-line style ``overrides`` (no run).
 
-    Types are checked here; ranges by :func:`~torchrl_causal.trainers.schema.validate_config`.
+    Types are checked here; ranges by :func:`~torchrl_causal.experiment.schema.validate_config`.
 
     Raises:
-        FileNotFoundError: if the config tree is not next to the package (a non-editable
-            install without the ``configs/`` folder).
+        FileNotFoundError: if the package was installed without its ``conf/`` data.
         hydra.errors.ConfigCompositionException: a value of the wrong type, an unknown
             key or an unknown group option, naming it.
     """

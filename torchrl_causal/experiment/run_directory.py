@@ -5,7 +5,7 @@ A run directory (``cfg.run_dir``) holds::
     config.yaml              the full resolved config of the run
     window.json              the adjustment window the policy was trained on
     status.json              {"status": "running" | "interrupted" | "failed" | "complete", counters}
-    code.json                every attempt's code, data and runtime (:mod:`~torchrl_causal.trainers.provenance`)
+    code.json                every attempt's code, data and runtime (:mod:`~torchrl_causal.experiment.provenance`)
                              (read as "killed" when it says running and no process holds .lock)
     train.log                the run's log lines (progress, evaluations, resume, errors)
     checkpoints/last.pt      networks, optimisers, schedulers, RNG states and counters (resume)
@@ -409,7 +409,7 @@ class RunDirectory:
 
     def record_attempt(self, identity: Mapping[str, Any], progress: int) -> dict[str, Any] | None:
         """Appends an attempt that starts at ``progress`` under ``identity`` (what
-        :func:`~torchrl_causal.trainers.provenance.attempt_identity` returns) to ``code.json``;
+        :func:`~torchrl_causal.experiment.provenance.attempt_identity` returns) to ``code.json``;
         returns the attempt before it, ``None`` for the first.
 
         Examples:

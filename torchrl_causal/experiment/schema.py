@@ -1,6 +1,6 @@
 """Typed schemas of the Hydra config tree (structured configs in Hydra's ConfigStore).
 
-Every group of ``configs/`` is merged onto one of these dataclasses at composition, so
+Every group of ``conf/`` is merged onto one of these dataclasses at composition, so
 a value of the wrong type (``seed=abc``, ``causal=maybe``, ``window.mode=fuzzy``) or an
 unknown key fails before anything runs, with the offending key named. Ranges (counts
 >= 1, strengths in [0, 1]...) are field metadata that :func:`validate_config` checks on
@@ -35,7 +35,7 @@ from typing import Any, Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
-from torchrl_causal.trainers.device import compile_unavailable, resolve_device
+from torchrl_causal.experiment.device import compile_unavailable, resolve_device
 
 __all__ = [
     "ALGO_SCHEMAS",
@@ -361,7 +361,7 @@ class IQLearnConfig(OffPolicyConfig):
 
 @dataclass
 class Config:
-    """The top level of ``configs/config.yaml``."""
+    """The top level of ``conf/config.yaml``."""
 
     env: EnvConfig = MISSING
     algo: AlgoConfig = MISSING
@@ -384,7 +384,7 @@ class Config:
     run_dir: str = MISSING
 
 
-#: Schema of each ``configs/algo`` option, stored in the ``algo`` group as ``schema_<name>``.
+#: Schema of each ``conf/algo`` option, stored in the ``algo`` group as ``schema_<name>``.
 ALGO_SCHEMAS: dict[str, type[AlgoConfig]] = {
     "expert": AlgoConfig,
     "bc": BCConfig,
@@ -476,11 +476,11 @@ def validate_config(cfg: DictConfig) -> None:
             a mandatory value left unset, naming the key.
 
     Examples:
-        >>> from torchrl_causal.trainers.config import compose_config
+        >>> from torchrl_causal.experiment.config import compose_config
         >>> validate_config(compose_config(["eval.final_episodes=0"]))
         Traceback (most recent call last):
         ...
-        torchrl_causal.trainers.schema.ConfigValueError: config value eval.final_episodes=0 is out of range: it must be >= 1
+        torchrl_causal.experiment.schema.ConfigValueError: config value eval.final_episodes=0 is out of range: it must be >= 1
     """
     OmegaConf.to_container(cfg, resolve=True, throw_on_missing=True)
     _check_ranges(cfg, "")

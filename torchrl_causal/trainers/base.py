@@ -35,10 +35,10 @@ from torchrl.record.loggers import Logger
 from torchrl_causal.data import read_metadata
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.progress import progress
-from torchrl_causal.trainers.device import resolve_device
-from torchrl_causal.trainers.interrupts import RunInterrupted, deferred_signals
-from torchrl_causal.trainers.provenance import attempt_identity, identity_changes
-from torchrl_causal.trainers.run_directory import TRAIN_CURVE, ConfigMismatchError, RunDirectory, atomic_write_text
+from torchrl_causal.experiment.device import resolve_device
+from torchrl_causal.experiment.interrupts import RunInterrupted, deferred_signals
+from torchrl_causal.experiment.provenance import attempt_identity, identity_changes
+from torchrl_causal.experiment.run_directory import TRAIN_CURVE, ConfigMismatchError, RunDirectory, atomic_write_text
 
 __all__ = ["Score", "Trainer"]
 
@@ -76,7 +76,7 @@ class Trainer(ABC):
     the policy (in the train regime), the best one by mean return is kept in
     ``checkpoints/best.pt``. The full state goes to ``checkpoints/last.pt`` at every
     evaluation, every ``cfg.checkpoint_every_s`` seconds and on SIGINT/SIGTERM, after
-    which :meth:`fit` raises :class:`~torchrl_causal.trainers.interrupts.RunInterrupted`.
+    which :meth:`fit` raises :class:`~torchrl_causal.experiment.interrupts.RunInterrupted`.
     Resume restores the networks, optimisers, schedulers, RNG states, counters and the
     episodes in flight: the run continues as if it had not stopped.
 

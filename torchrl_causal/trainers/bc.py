@@ -22,7 +22,7 @@ from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.modules import fit_standardizers
 from torchrl_causal.trainers.base import Trainer
-from torchrl_causal.trainers.builders import expert_transitions, load_or_collect_demonstrations, make_imitator_env, make_policy
+from torchrl_causal.experiment.builders import expert_transitions, load_or_collect_demonstrations, make_imitator_env, make_policy
 
 __all__ = ["BCTrainer", "episode_split"]
 

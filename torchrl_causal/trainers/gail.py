@@ -35,7 +35,7 @@ from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.objectives import ABSORBING_KEY, add_absorbing_transitions, gail_discriminator_batch
 from torchrl_causal.trainers.base import Trainer
-from torchrl_causal.trainers.builders import (
+from torchrl_causal.experiment.builders import (
     TRANSITION_KEYS,
     expert_transitions,
     instantiate_with_strings,
@@ -45,7 +45,7 @@ from torchrl_causal.trainers.builders import (
     observation_dim,
 )
 from torchrl_causal.trainers.collection import ResumableCollector
-from torchrl_causal.trainers.device import CPU
+from torchrl_causal.experiment.device import CPU
 
 __all__ = ["GAILTrainer"]
 

@@ -55,7 +55,7 @@ from torchrl.data import LazyMemmapStorage, LazyTensorStorage, TensorDictReplayB
 
 from torchrl_causal.objectives import ExpertFlaggedSACLoss, add_absorbing_transitions, eval_mode
 from torchrl_causal.trainers.base import Trainer
-from torchrl_causal.trainers.builders import (
+from torchrl_causal.experiment.builders import (
     TRANSITION_KEYS,
     expert_transitions,
     instantiate_with_strings,
@@ -65,8 +65,8 @@ from torchrl_causal.trainers.builders import (
     observation_dim,
 )
 from torchrl_causal.trainers.collection import ResumableCollector
-from torchrl_causal.trainers.device import CPU
-from torchrl_causal.trainers.run_directory import CheckpointError
+from torchrl_causal.experiment.device import CPU
+from torchrl_causal.experiment.run_directory import CheckpointError
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
 __all__ = ["OffPolicyILTrainer"]

@@ -1,0 +1,212 @@
+"""A run's lifecycle as library functions: :func:`run` trains, selects and evaluates one
+config; :func:`open_run` reopens a run directory with its evaluator and selected policy;
+:func:`evaluate_run` evaluates that policy again under new settings.
+
+The command lines (:mod:`torchrl_causal.cli`) are thin wrappers over these.
+
+A run directory belongs to one config (a changed config is refused, naming the changed
+keys) and to one process at a time (a second one is refused, naming the first);
+calling :func:`run` again on the same config resumes an unfinished run from its last
+checkpoint and returns a finished run's stored evaluations. SIGINT or SIGTERM finishes
+the training step in flight, checkpoints, marks the run interrupted and raises
+:class:`~torchrl_causal.experiment.interrupts.RunInterrupted`.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import torch
+from hydra.utils import get_class
+from omegaconf import DictConfig
+from tensordict.nn import TensorDictModuleBase
+
+from torchrl_causal.evaluation.evaluator import Evaluator
+from torchrl_causal.evaluation.metrics import EvaluationResult
+from torchrl_causal.experiment.builders import make_window
+from torchrl_causal.experiment.config import register_resolvers
+from torchrl_causal.experiment.device import resolve_device
+from torchrl_causal.experiment.interrupts import RunInterrupted, signals_raise
+from torchrl_causal.experiment.run_directory import RunDirectory
+from torchrl_causal.experiment.schema import validate_config
+from torchrl_causal.trainers.base import Trainer
+
+__all__ = ["DEFAULT_THREADS", "REGIMES", "evaluate_run", "open_run", "record_settings", "run"]
+
+log = logging.getLogger("torchrl_causal")
+
+register_resolvers()
+
+REGIMES = ("train", "deploy")
+
+
+@contextmanager
+def _run_log(run: RunDirectory) -> Iterator[None]:
+    """Copies the package's log records (INFO and up) to ``<run_dir>/train.log``."""
+    handler = logging.FileHandler(run.train_log)
+    handler.setFormatter(logging.Formatter("[%(asctime)s][%(name)s][%(levelname)s] %(message)s"))
+    level = log.level
+    log.addHandler(handler)
+    if log.getEffectiveLevel() > logging.INFO:
+        log.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(level)
+        handler.close()
+
+
+def _first_missing(path: Path) -> Path | None:
+    """The outermost folder of ``path`` that does not exist yet (``None``: it exists)."""
+    missing = None
+    for folder in (path, *path.parents):
+        if folder.exists():
+            break
+        missing = folder
+    return missing
+
+
+def _stored_results(run: RunDirectory) -> dict[str, EvaluationResult]:
+    return {regime: EvaluationResult.from_dict(run.read_json(run.eval_path(regime)))
+            for regime in REGIMES if run.eval_path(regime).is_file()}
+
+
+def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
+    """Trains, selects and evaluates one run of ``cfg``; returns the final evaluation of
+    the selected policy in each regime (written to ``eval/<regime>.json``).
+
+    Raises:
+        ConfigValueError: a value out of range (nothing is written).
+        ConfigMismatchError: ``cfg.run_dir`` holds a run of another config (nothing is written).
+        RunInUseError: another process is running ``cfg.run_dir`` (nothing is written).
+        RunInterrupted: on SIGINT/SIGTERM, after checkpointing and marking the run interrupted.
+    """
+    validate_config(cfg)
+    trainer_class: type[Trainer] | None = get_class(cfg.algo.trainer) if cfg.algo.trainer else None
+    total = trainer_class.budget(cfg) if trainer_class else 0
+    run_dir = RunDirectory(cfg.run_dir)
+    created = _first_missing(run_dir.path)  # what a failure before any checkpoint removes
+    killed = run_dir.read_status().get("status") == "killed"
+    with run_dir.lock():
+        if killed and cfg.resume:
+            log.warning("%s: its last attempt was killed before it could record its stop; resuming from its last "
+                        "checkpoint", run_dir.path)
+        if not cfg.resume:
+            run_dir.discard()
+            created = created or run_dir.path
+        return _claim_and_run(cfg, run_dir, trainer_class, total, created)
+
+
+def _claim_and_run(cfg: DictConfig, run_dir: RunDirectory, trainer_class: type[Trainer] | None, total: int,
+                   created: Path | None) -> dict[str, EvaluationResult]:
+    extendable = trainer_class is not None and trainer_class.extendable_budget(cfg)
+    run_dir.claim(cfg, ignored=(trainer_class.budget_key,) if extendable else ())
+    status = run_dir.read_status()
+    if status.get("status") == "complete" and status.get("total") == total:
+        log.info("%s is complete: its stored evaluations are returned", run_dir.path)
+        return _stored_results(run_dir)
+    with _run_log(run_dir), signals_raise():
+        try:
+            return _train_and_evaluate(cfg, run_dir, trainer_class, total)
+        except RunInterrupted:
+            if run_dir.read_status().get("status") != "interrupted":  # stopped outside the training loop
+                run_dir.update_status("interrupted")
+            raise
+        except Exception as error:
+            if created is not None and not run_dir.last_checkpoint.is_file():
+                shutil.rmtree(created, ignore_errors=True)  # leave no half-made run directory behind
+            else:
+                run_dir.update_status("failed", error=f"{type(error).__name__}: {error}")
+            raise
+
+
+def _train_and_evaluate(cfg: DictConfig, run_dir: RunDirectory, trainer_class: type[Trainer] | None,
+                        total: int) -> dict[str, EvaluationResult]:
+    torch.manual_seed(cfg.seed)
+    torch.set_num_threads(cfg.threads)
+    window = make_window(cfg) if trainer_class else None
+    evaluator = Evaluator(cfg, window, progress=cfg.progress_bar)
+    policy = None  # the env's expert
+    if trainer_class is not None:
+        run_dir.write_json(run_dir.window_file, window.to_dict())
+        trainer = trainer_class(cfg, run_dir, window, evaluator.periodic)
+        trainer.fit()
+        policy = trainer.best_policy()
+    results = evaluator.final(policy)
+    for regime, result in results.items():
+        run_dir.write_json(run_dir.eval_path(regime), evaluator.record(result))
+        log.info("%s [%s] success %.1f%% ± %.1f, E[Y] %.1f ± %.1f, episodes %d", cfg.run_dir, regime,
+                 100 * result.success_rate, 100 * result.success_se, result.return_mean, result.return_std,
+                 result.n_episodes)
+    run_dir.update_status("complete", total=total, progress=total if trainer_class is None else trainer.progress)
+    if trainer_class is not None:
+        trainer.finish()
+    return results
+
+
+DEFAULT_THREADS = 1
+
+
+def record_settings(episodes: int, seed: int, num_envs: int, confounding_strength: float | None) -> str:
+    """The part of a record's name that tells its settings apart.
+
+    Examples:
+        >>> record_settings(1000, 30000, 100, None), record_settings(6, 1, 3, 0.5)
+        ('n1000-seed30000-envs100', 'n6-seed1-envs3-cs0.5')
+    """
+    name = f"n{episodes}-seed{seed}-envs{num_envs}"
+    return name if confounding_strength is None else f"{name}-cs{confounding_strength:g}"
+
+
+def open_run(run_dir: str | Path, *, confounding_strength: float | None = None,
+             device: str | None = None) -> tuple[RunDirectory, Evaluator, TensorDictModuleBase | None]:
+    """The run directory, an :class:`Evaluator` of its config and its selected policy
+    (``checkpoints/best.pt``; ``None`` for the expert row, which the evaluator rebuilds
+    from each env).
+
+    Raises:
+        ValueError: naming ``device`` when it is given and this machine lacks it.
+    """
+    run = RunDirectory(run_dir)
+    cfg = run.read_config()
+    if confounding_strength is not None:
+        cfg.env.confounding_strength = float(confounding_strength)
+    if device is not None:
+        resolve_device(str(device))
+        cfg.device = str(device)
+    else:
+        try:
+            resolve_device(cfg.device)
+        except ValueError:
+            cfg.device = "cpu"
+    window = AdjustmentWindow.from_dict(json.loads(run.window_file.read_text())) if cfg.algo.trainer else None
+    evaluator = Evaluator(cfg, window, progress=True)
+    return run, evaluator, evaluator.load_best_policy(run) if window is not None else None
+
+
+def evaluate_run(run_dir: str | Path, regime: str = "deploy", episodes: int = 1000, *, num_envs: int | None = None,
+                 seed: int = 30_000, confounding_strength: float | None = None, trajectories: int = 0,
+                 save: bool = True, reuse: bool = False, device: str | None = None) -> EvaluationResult:
+    """Evaluates the selected policy of ``run_dir`` (see the module docstring); with
+    ``reuse=True`` a stored record of the same settings is returned instead.
+
+    Raises:
+        ValueError: naming ``device`` when it is given and this machine lacks it.
+    """
+    stored = RunDirectory(run_dir)
+    num_envs = min(int(num_envs or stored.read_config().eval.num_envs), int(episodes))
+    record = stored.eval_path(regime, record_settings(int(episodes), int(seed), num_envs, confounding_strength))
+    if reuse and record.is_file():
+        return EvaluationResult.from_dict(stored.read_json(record))
+    run, evaluator, policy = open_run(run_dir, confounding_strength=confounding_strength, device=device)
+    result = evaluator.evaluate(policy, regime, int(episodes), int(seed), trajectories=int(trajectories),
+                                num_envs=num_envs)
+    if save:
+        run.write_json(record, evaluator.record(result))
+    return result
