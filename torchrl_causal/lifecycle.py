@@ -34,6 +34,7 @@ from torchrl_causal.experiment.device import resolve_device
 from torchrl_causal.experiment.interrupts import RunInterrupted, signals_raise
 from torchrl_causal.experiment.run_directory import RunDirectory
 from torchrl_causal.experiment.schema import validate_config
+from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.trainers.base import Trainer
 
 __all__ = ["DEFAULT_THREADS", "REGIMES", "evaluate_run", "open_run", "record_settings", "run"]
