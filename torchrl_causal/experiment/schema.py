@@ -174,6 +174,22 @@ class SACStyleLossConfig(Target):
     max_alpha: float = positive()
     target_entropy: Any = MISSING  # "auto" (-|A|) or a number
     absorbing: bool = MISSING  # absorbing states after termination, for expert and policy data
+    goal_value: Optional[GoalValue] = None  # null: the goal is worth zero (the paper); expert: r_E / (1 - gamma)
+    bc_weight: Optional[float] = _ranged(gt=0.0, default=None)  # null: no behaviour-cloning anchor on the actor
+
+
+class GoalValue(str, enum.Enum):
+    """``goal_value=...`` of the SQIL / IQ-Learn losses (null: zero, the paper's objective)."""
+
+    expert = "expert"
+
+
+@dataclass
+class WarmStartConfig:
+    """``algo.warm_start``: behaviour-clone the actor, then fit the critics to it, before the soft-Q updates."""
+
+    bc_updates: int = at_least(0)
+    critic_updates: int = at_least(0)
 
 
 class IQLearnVariant(str, enum.Enum):
@@ -343,6 +359,8 @@ class OffPolicyConfig(TrainedAlgoConfig):
     critic_optimizer: OptimizerConfig = MISSING
     alpha_optimizer: OptimizerConfig = MISSING
     critic_scheduler: Optional[CosineScheduleConfig] = MISSING  # None: a constant learning rate
+    schedule_updates: Optional[int] = _ranged(ge=1, default=None)  # the schedule's span; null: the run's updates
+    warm_start: Optional[WarmStartConfig] = None  # null: the paper's cold start (random warm-up actions)
     batch_size: int = at_least(2)
     max_grad_norm: float = positive()
     buffer_size: int = at_least()

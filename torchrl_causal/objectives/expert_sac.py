@@ -11,20 +11,30 @@ TorchRL's :class:`~torchrl.objectives.SACLoss` and read one extra key: a boolean
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import torch
 from tensordict import TensorDictBase
-from tensordict.nn import ProbabilisticTensorDictSequential, TensorDictModule
+from tensordict.nn import dispatch, ProbabilisticTensorDictSequential, TensorDictModule
 from tensordict.utils import NestedKey
+from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives import SACLoss
 
 from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingIndicator
 from torchrl_causal.objectives.utils import eval_mode
 
-__all__ = ["ALPHA_CLAMP", "ExpertFlaggedSACLoss"]
+__all__ = ["ALPHA_CLAMP", "GOAL_VALUES", "ExpertFlaggedSACLoss"]
 
 #: The paper's clamp on the entropy coefficient, ``[exp(-log 1000), exp(-log 10)]``.
 ALPHA_CLAMP: tuple[float, float] = (1e-3, 1e-1)
+
+#: What a goal-terminated transition bootstraps from: ``None`` (zero, the paper's
+#: objective) or ``"expert"`` (the value of an expert state held for ever).
+GOAL_VALUES: tuple[str | None, ...] = (None, "expert")
+
+#: Expert actions are clipped this far inside the action bounds before their
+#: log-likelihood is taken: a tanh-Gaussian gives the bounds themselves density zero.
+_BC_ACTION_MARGIN = 1e-3
 
 
 class ExpertFlaggedSACLoss(SACLoss):
@@ -60,6 +70,18 @@ class ExpertFlaggedSACLoss(SACLoss):
         max_alpha (float, optional): upper clamp of alpha. Defaults to ``0.1``.
         absorbing (bool, optional): read absorbing-state flags (see above).
             Defaults to ``False``.
+        goal_value (str, optional): ``None`` (default, the paper's objective): a
+            goal-terminated transition bootstraps from zero, which makes every imitation
+            reward that pays expert-like steps pay stopping short of the goal. ``"expert"``:
+            it bootstraps from :attr:`expert_value`, the value of an expert state kept for
+            ever (``expert_reward / (1 - gamma)``), so reaching the goal is worth what
+            staying on the expert's path is worth, and no more. Unlike ``absorbing`` it adds
+            no rows, no action and no entropy bonus in the goal.
+        bc_weight (float, optional): ``None`` (default) or ``w > 0``: adds ``"loss_bc"``,
+            a behaviour-cloning anchor on the expert rows (TD3+BC's, Fujimoto & Gu 2021):
+            ``w * |loss_actor| * mean((mode(pi(z)) - x_E)^2)``. Scaling by the actor
+            loss's magnitude (about the mean ``Q``) keeps the anchor's weight relative to
+            the critic's pull whatever the reward scale.
         **kwargs: forwarded to :class:`~torchrl.objectives.SACLoss`.
     """
 
@@ -87,10 +109,18 @@ class ExpertFlaggedSACLoss(SACLoss):
         min_alpha: float = ALPHA_CLAMP[0],
         max_alpha: float = ALPHA_CLAMP[1],
         absorbing: bool = False,
+        goal_value: Literal["expert"] | None = None,
+        bc_weight: float | None = None,
         **kwargs,
     ) -> None:
         if not 0.0 < min_alpha <= max_alpha:
             raise ValueError(f"need 0 < min_alpha <= max_alpha, got min_alpha={min_alpha}, max_alpha={max_alpha}.")
+        if goal_value not in GOAL_VALUES:
+            raise ValueError(f"goal_value must be one of {GOAL_VALUES}, got {goal_value!r}.")
+        if goal_value is not None and absorbing:
+            raise ValueError("goal_value and absorbing are two answers to the same bias: choose one.")
+        if bc_weight is not None and not bc_weight > 0:
+            raise ValueError(f"bc_weight must be None (off) or positive, got {bc_weight!r}.")
         if absorbing:
             qvalue_network = AbsorbingIndicator(qvalue_network)
         super().__init__(
@@ -103,6 +133,71 @@ class ExpertFlaggedSACLoss(SACLoss):
             max_alpha=max_alpha,
             **kwargs,
         )
+        if bc_weight is not None and self.reduction == "none":
+            raise ValueError("bc_weight needs a reduced loss (reduction='mean' or 'sum'), got reduction='none'.")
+        self.goal_value = goal_value
+        self.bc_weight = bc_weight
+
+    #: The per-step reward of an expert transition in the critic's target (SQIL's label;
+    #: subclasses whose critic reward is implicit say what it is).
+    expert_reward: float = 1.0
+
+    @property
+    def discount(self) -> float:
+        """The discount of the value estimator (:meth:`make_value_estimator`)."""
+        return float(self.value_estimator.gamma)
+
+    @property
+    def expert_value(self) -> float:
+        r"""The soft value of an expert state kept for ever, :math:`r_E / (1 - \gamma)`.
+
+        Under SQIL's labels every state of a demonstration that never ends is worth this
+        (:math:`\sum_t \gamma^t r_E`); the goal, where the expert stays, is such a state.
+        """
+        return self.expert_reward / (1.0 - self.discount)
+
+    def goal_bootstrap(self, tensordict: TensorDictBase) -> torch.Tensor | float:
+        r""":math:`\gamma\, d\, V_{goal}` for every transition (``d`` the terminal flag), or
+        ``0.0`` with ``goal_value=None``: what the critic target adds for entering the goal."""
+        if self.goal_value is None:
+            return 0.0
+        terminated = tensordict.get(("next", self.tensor_keys.terminated)).to(self.log_alpha.dtype)
+        return self.discount * self.expert_value * terminated
+
+    def expert_actions(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
+        """The batch's actions clipped inside the bounds, and the expert rows' weights (sum 1)."""
+        expert = self.expert_flag(tensordict).to(self.log_alpha.dtype)
+        weights = expert / expert.sum().clamp_min(1.0)
+        spec = self.actor_network.spec[self.tensor_keys.action]
+        low, high = spec.space.low.to(weights.device), spec.space.high.to(weights.device)
+        margin = _BC_ACTION_MARGIN * (high - low)
+        actions = tensordict.get(self.tensor_keys.action).clamp(low + margin, high - margin)
+        return actions, weights
+
+    def behaviour_cloning_nll(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """Mean negative log-likelihood of the expert rows' actions under the actor (maximum-
+        likelihood behaviour cloning: fits the mean and the spread); used to warm-start it."""
+        actions, weights = self.expert_actions(tensordict)
+        with self.actor_network_params.to_module(self.actor_network, preserve_module_state=False):
+            dist = self.actor_network.get_dist(tensordict.select(*self.actor_network.in_keys, strict=False))
+            log_prob = dist.log_prob(actions)
+        return -(weights.squeeze(-1) * log_prob.reshape(weights.shape[:-1])).sum()
+
+    def behaviour_cloning_anchor(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """Mean squared error between the actor's deterministic action and the expert rows' actions."""
+        actions, weights = self.expert_actions(tensordict)
+        with set_exploration_type(ExplorationType.DETERMINISTIC), \
+                self.actor_network_params.to_module(self.actor_network, preserve_module_state=False):
+            dist = self.actor_network.get_dist(tensordict.select(*self.actor_network.in_keys, strict=False))
+            mode = dist.deterministic_sample
+        return (weights * (mode - actions).pow(2).mean(-1, keepdim=True)).sum()
+
+    @dispatch
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        out = super().forward(tensordict)
+        if self.bc_weight is not None:
+            out.set("loss_bc", self.bc_weight * out["loss_actor"].detach().abs() * self.behaviour_cloning_anchor(tensordict))
+        return out
 
     @property
     def absorbing(self) -> bool:

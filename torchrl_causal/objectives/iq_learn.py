@@ -93,6 +93,10 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
             value. Defaults to ``16`` (paper's AntMaze; HumanoidMaze uses ``1``).
         min_alpha, max_alpha (float, optional): alpha clamp, defaults ``1e-3`` and ``0.1``.
         absorbing (bool, optional): read absorbing-state flags. Defaults to ``False``.
+        goal_value, bc_weight: the goal's value (``variant="paper"`` only: its expert reward
+            is ``1/p``, so the goal is worth ``(1/p) / (1 - gamma)``) and the
+            behaviour-cloning anchor, off by default (see
+            :class:`~torchrl_causal.objectives.expert_sac.ExpertFlaggedSACLoss`).
         **kwargs: see :class:`~torchrl_causal.objectives.expert_sac.ExpertFlaggedSACLoss`
             and :class:`~torchrl.objectives.SACLoss`.
 
@@ -147,6 +151,9 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
             raise ValueError(f"variant must be one of {IQ_LEARN_VARIANTS}, got {variant!r}.")
         if not isinstance(num_value_samples, int) or num_value_samples < 1:
             raise ValueError(f"num_value_samples must be a positive integer, got {num_value_samples!r}.")
+        if variant == "iq_learn" and kwargs.get("goal_value") is not None:
+            raise ValueError("goal_value is derived for the paper's variant (SQIL with expert reward 1/p); "
+                             "variant='iq_learn' learns its implicit reward and has no such value.")
         super().__init__(actor_network, qvalue_network, min_alpha=min_alpha, max_alpha=max_alpha,
                          absorbing=absorbing, **kwargs)
         self.variant = variant
@@ -210,8 +217,11 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
         q = self._vmap_qnetworkN0(
             tensordict.select(*self.qvalue_network.in_keys, strict=False), self.qvalue_network_params
         ).get(self.tensor_keys.state_action_value)
-        implicit_reward = q - discount * next_value
-        expert_weight = expert * (expert.numel() / num_expert)
+        # The paper's critic is SQIL with expert reward 1/p (p the batch's expert fraction):
+        # its goal is worth (1/p) / (1 - gamma), goal_bootstrap's value at expert reward 1.
+        inverse_fraction = expert.numel() / num_expert
+        implicit_reward = q - discount * next_value - self.goal_bootstrap(tensordict) * inverse_fraction
+        expert_weight = expert * inverse_fraction
         per_sample = (0.5 * implicit_reward - expert_weight) * implicit_reward + value_term
         loss = self._reduce_loss(per_sample.sum(0).squeeze(-1), tensordict=tensordict, weights=weights)
         td_error = implicit_reward.detach().abs().max(0)[0].squeeze(-1)

@@ -46,6 +46,8 @@ class SQILLoss(ExpertFlaggedSACLoss):
             ``1.0`` (SQIL); ``2.0`` with half-expert batches gives the critic gradient of
             :class:`~torchrl_causal.objectives.IQLearnLoss` ``variant="paper"``, doubled.
         absorbing (bool, optional): read absorbing-state flags. Defaults to ``False``.
+        goal_value, bc_weight: the goal's value and the behaviour-cloning anchor, off by
+            default (see :class:`~torchrl_causal.objectives.expert_sac.ExpertFlaggedSACLoss`).
         min_alpha, max_alpha (float, optional): alpha clamp, defaults ``1e-3`` and ``0.1``.
         **kwargs: see :class:`~torchrl_causal.objectives.expert_sac.ExpertFlaggedSACLoss`
             and :class:`~torchrl.objectives.SACLoss`.
@@ -106,10 +108,12 @@ class SQILLoss(ExpertFlaggedSACLoss):
         self.expert_reward = float(expert_reward)
 
     def relabel(self, tensordict: TensorDictBase) -> TensorDictBase:
-        """Returns a shallow copy of the batch with ``("next", reward)`` = ``expert_reward`` for expert, 0 for policy transitions."""
+        """Returns a shallow copy of the batch with ``("next", reward)`` = ``expert_reward`` for
+        expert, 0 for policy transitions, plus :meth:`goal_bootstrap` (``goal_value="expert"``):
+        the terminal flag still stops the bootstrap, so the goal's value enters as reward."""
         relabelled = tensordict.copy()
         reward = self.expert_flag(tensordict).to(self.log_alpha.dtype) * self.expert_reward
-        relabelled.set(("next", self.tensor_keys.reward), reward)
+        relabelled.set(("next", self.tensor_keys.reward), reward + self.goal_bootstrap(tensordict))
         return relabelled
 
     @dispatch

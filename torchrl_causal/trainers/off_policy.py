@@ -12,8 +12,9 @@ The counts are exact: the first ``random_steps`` env steps use uniformly random
 actions (a whole number of collector batches, or the config is refused); after ``n``
 further env steps ``floor(utd_ratio * n)`` gradient steps have run, interleaved with
 collection every ``frames_per_batch`` env steps (by default one step of every batched
-env); the cosine schedule of the critic learning rate spans exactly the run's number of
-gradient steps, so none runs at learning rate zero. The actor collects in eval mode
+env); the cosine schedule of the critic learning rate spans ``algo.schedule_updates``
+gradient steps, or exactly the run's number of them when that is null (the paper-faithful
+configs), so none runs at learning rate zero. The actor collects in eval mode
 (no dropout): the replay buffer holds the policy that is evaluated. With
 ``algo.loss.absorbing`` the expert and policy transitions get absorbing states
 (:func:`~torchrl_causal.objectives.add_absorbing_transitions`).
@@ -24,6 +25,14 @@ The policy buffer is a memory-mapped TorchRL storage in the run directory
 Networks, losses, optimisers and the expert buffer live on ``cfg.device``; batches
 sampled from the (CPU, memory-mapped) policy buffer are moved there. The envs step on
 the CPU and the collector moves observations to the policy and actions back.
+
+``algo.warm_start`` (off in the paper's configs) starts the actor from behaviour cloning
+on the expert buffer (:meth:`~OffPolicyILTrainer.clone_expert_actions`), lets it collect
+the warm-up steps instead of random actions, and fits the critics to it alone
+(:meth:`~OffPolicyILTrainer.fit_critics`) before the first joint update: the soft-Q
+update then starts from C-BC's solution instead of spending its first 150-250k env steps
+at zero success. ``algo.schedule_updates`` fixes the span of the critic's learning-rate
+schedule; without it the schedule spans the run's updates (the paper-faithful configs).
 ``collector_workers > 1`` steps the envs in that many processes (TorchRL's
 :class:`~torchrl.collectors.MultiSyncCollector`), for the MuJoCo mazes whose physics is
 the bottleneck. Loss scalars are averaged on the device and read back every
@@ -87,8 +96,20 @@ class OffPolicyILTrainer(Trainer):
 
     @classmethod
     def extendable_budget(cls, cfg: DictConfig) -> bool:
-        # A cosine schedule spans the budget: a longer run is another run.
-        return cfg.algo.critic_scheduler is None
+        # A cosine schedule over the run's budget makes a longer run another run; one whose
+        # span the config fixes (algo.schedule_updates) does not.
+        return cfg.algo.critic_scheduler is None or cfg.algo.get("schedule_updates") is not None
+
+    def schedule_span(self) -> int:
+        """Updates the critic's learning-rate schedule spans: ``algo.schedule_updates`` when
+        the config fixes it, else (the paper-faithful configs) every update of the run."""
+        span = self.cfg.algo.get("schedule_updates")
+        return int(span) if span is not None else max(1, self.updates_due(self.total))
+
+    @property
+    def warm_start(self) -> DictConfig | None:
+        """``algo.warm_start`` (``bc_updates``, ``critic_updates``), or ``None`` (the paper's cold start)."""
+        return self.cfg.algo.get("warm_start")
 
     @property
     def policy(self) -> TensorDictModuleBase:
@@ -114,7 +135,7 @@ class OffPolicyILTrainer(Trainer):
         self.workers = self.cfg.collector_workers
         self.env = make_imitator_env(self.cfg, self.window, "train", algo.num_envs // self.workers, self.cfg.seed)
         self.loss = self._make_loss()
-        cosine_updates = max(1, self.updates_due(self.total))
+        cosine_updates = self.schedule_span()
         self.update = ActorCriticUpdate(
             self.loss, actor_optimizer=instantiate(algo.actor_optimizer),
             critic_optimizer=instantiate(algo.critic_optimizer), alpha_optimizer=instantiate(algo.alpha_optimizer),
@@ -148,7 +169,9 @@ class OffPolicyILTrainer(Trainer):
     def _make_collector(self) -> ResumableCollector | MultiSyncCollector:
         algo = self.cfg.algo
         frames = algo.frames_per_batch
-        remaining_random = max(0, algo.random_steps - self.progress)
+        # A warm-started actor collects the warm-up steps itself: random actions would
+        # throw its head start away.
+        remaining_random = 0 if self.warm_start else max(0, algo.random_steps - self.progress)
         devices = dict(env_device=CPU, policy_device=self.device, storing_device=self.device)
         with eval_mode(self.policy):  # the collector probes the policy when it is built
             if self.workers == 1:
@@ -180,7 +203,39 @@ class OffPolicyILTrainer(Trainer):
         self._reset_scalar_sums()
         return means
 
+    def clone_expert_actions(self) -> None:
+        """Warm start, part 1: ``warm_start.bc_updates`` steps of maximum-likelihood behaviour
+        cloning of the actor on the expert buffer (its own Adam, ``algo.actor_optimizer``'s
+        settings), before the first env step."""
+        updates = self.warm_start.bc_updates
+        optimizer = instantiate(self.cfg.algo.actor_optimizer)(list(self.loss.actor_network_params.flatten_keys().values()))
+        for step in range(1, updates + 1):
+            nll = self.loss.behaviour_cloning_nll(self.expert_buffer.sample())
+            optimizer.zero_grad(set_to_none=True)
+            nll.backward()
+            torch.nn.utils.clip_grad_norm_(optimizer.param_groups[0]["params"], self.cfg.algo.max_grad_norm)
+            optimizer.step()
+            if step % 1000 == 0 or step == updates:
+                log.info("warm start: behaviour cloning %d/%d, expert action NLL %.3f", step, updates, nll.item())
+
+    def fit_critics(self) -> None:
+        """Warm start, part 2: ``warm_start.critic_updates`` critic-only updates on expert and
+        policy batches, the warm-started actor held fixed, before the first joint update."""
+        updates = self.warm_start.critic_updates
+        for step in range(1, updates + 1):
+            loss = self.update.critic_step(self.sample_batch())
+            if step % 1000 == 0 or step == updates:
+                log.info("warm start: critic fit %d/%d, critic loss %.3f", step, updates, loss.item())
+
+    def sample_batch(self) -> TensorDictBase:
+        """An update's batch: the expert half, then the policy half."""
+        return torch.cat([self.expert_buffer.sample(), self.policy_buffer.sample()], dim=0)
+
     def train_step(self) -> Mapping[str, torch.Tensor]:
+        # A fresh run's warm start: progress and the update count say whether each part ran,
+        # so a run resumed from a checkpoint never repeats one.
+        if self.warm_start and self.progress == 0 and self.warm_start.bc_updates:
+            self.clone_expert_actions()
         with eval_mode(self.policy):
             if self.collector is None:
                 self.collector = self._make_collector()
@@ -194,9 +249,11 @@ class OffPolicyILTrainer(Trainer):
         self.progress += transitions.numel()
         self.scalar_sums[0] += transitions["next", "reward"].mean()
         self.batches_since_log += 1
-        for _ in range(self.updates_due(self.progress) - self.update.updates):
-            batch = torch.cat([self.expert_buffer.sample(), self.policy_buffer.sample()], dim=0)
-            self.scalar_sums[1:] += self.update(batch)
+        owed = self.updates_due(self.progress) - self.update.updates
+        if owed > 0 and self.update.updates == 0 and self.warm_start and self.warm_start.critic_updates:
+            self.fit_critics()
+        for _ in range(owed):
+            self.scalar_sums[1:] += self.update(self.sample_batch())
             self.updates_since_log += 1
         due = self.updates_since_log >= self.log_every or self.update.updates == 0 or self.progress >= self.total
         return self._scalar_means() if due else {}

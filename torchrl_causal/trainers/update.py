@@ -35,7 +35,7 @@ def _build_optimizer(factory: OptimizerFactory, params: list[torch.Tensor]) -> t
 
 
 class ActorCriticUpdate:
-    """Loss forward, one backward of ``loss_qvalue + loss_actor + loss_alpha``, gradient
+    """Loss forward, one backward of the sum of its ``loss_*`` outputs, gradient
     norms clipped per network, optimiser steps for critic, actor and alpha, the critic's
     learning-rate schedule, then the update of the target critics.
 
@@ -150,7 +150,8 @@ class ActorCriticUpdate:
         # Plain tensors out, no TensorDict: a compiled graph that returns one is rebuilt
         # after the graph, which costs more tracing time than the loss itself.
         out = self.loss(batch)
-        total = out["loss_qvalue"] + out["loss_actor"] + out["loss_alpha"]
+        # Every "loss_*" entry (TorchRL's convention): SAC's three and the optional "loss_bc".
+        total = sum(value for key, value in out.items() if key.startswith("loss_"))
         return total, torch.stack([out[key].detach() for key in self.SCALARS])
 
     def __call__(self, batch: TensorDictBase) -> torch.Tensor:
@@ -168,6 +169,21 @@ class ActorCriticUpdate:
         self.target_updater.step()
         self.updates += 1
         return scalars
+
+    def critic_step(self, batch: TensorDictBase) -> torch.Tensor:
+        """One update of the critics alone (clipped, then the target update), the actor and
+        alpha left as they are; returns the critic loss, detached. Used to fit the critics to
+        a warm-started actor before the two learn together; it neither counts in
+        :attr:`updates` nor steps the learning-rate schedule. Runs eagerly."""
+        loss_qvalue = self.loss(batch)["loss_qvalue"]
+        self.critic_optimizer.zero_grad(set_to_none=True)
+        loss_qvalue.backward()
+        torch.nn.utils.clip_grad_norm_(self.critic_params, self.max_grad_norm)
+        self.critic_optimizer.step()
+        for optimizer in (self.actor_optimizer, self.alpha_optimizer):
+            optimizer.zero_grad(set_to_none=True)  # the actor and alpha losses were not backpropagated
+        self.target_updater.step()
+        return loss_qvalue.detach()
 
     def state_dict(self) -> dict[str, Any]:
         """Optimiser and schedule states and the update count (the loss saves its own)."""
