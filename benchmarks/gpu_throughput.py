@@ -59,6 +59,10 @@ LOSSES: dict[str, Callable] = {
     "SQILLoss": lambda actor, critic: SQILLoss(actor, critic),
     "IQLearnLoss K=16": lambda actor, critic: IQLearnLoss(actor, critic, num_value_samples=16),
     "IQLearnLoss K=1": lambda actor, critic: IQLearnLoss(actor, critic, num_value_samples=1),
+    # +recipe=goal_valued_bc_anchored's loss options (the warm start runs before training).
+    "SQILLoss recipe": lambda actor, critic: SQILLoss(actor, critic, goal_value="expert", bc_weight=0.4),
+    "IQLearnLoss K=16 recipe": lambda actor, critic: IQLearnLoss(actor, critic, num_value_samples=16,
+                                                                 goal_value="expert", bc_weight=0.4),
 }
 TARGETS = {("cuda", "SQILLoss"): ("updates/s", 300.0), ("cpu", "IQLearnLoss K=16"): ("ratio", 0.6),
            ("cuda", "IQLearnLoss K=16"): ("ratio", 0.9)}

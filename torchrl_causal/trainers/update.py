@@ -138,15 +138,15 @@ class ActorCriticUpdate:
             options = {"dynamic": False, **(compile_options or {})}
             if options.get("backend", "inductor") == "inductor":
                 options["options"] = {"fallback_random": True, **options.get("options", {})}
-            self._forward = torch.compile(self._losses, **options)
+            self._forward = torch.compile(self.losses, **options)
         else:
-            self._forward = self._losses
+            self._forward = self.losses
 
     @property
     def optimizers(self) -> tuple[torch.optim.Optimizer, ...]:
         return self.critic_optimizer, self.actor_optimizer, self.alpha_optimizer
 
-    def _losses(self, batch: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
+    def losses(self, batch: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
         # Plain tensors out, no TensorDict: a compiled graph that returns one is rebuilt
         # after the graph, which costs more tracing time than the loss itself.
         out = self.loss(batch)
