@@ -280,3 +280,30 @@ def test_the_recipe_warm_starts_a_run_and_fixes_its_schedule_span(tmp_path, capl
         trainer.close()
     results = run(cfg)  # and the whole run completes, evaluating in both regimes
     assert set(results) >= {"train", "deploy"}
+
+
+def test_a_shipped_policy_directory_evaluates_as_its_run(tmp_path) -> None:
+    import torch as _torch
+
+    from torchrl_causal.evaluate import evaluate_run
+    from torchrl_causal.evaluation.runs import archive_runs
+    from torchrl_causal.train import run
+    from torchrl_causal.trainers import CheckpointError, RunDirectory, compose_config
+
+    cfg = compose_config(["env=rovermaze_u", "env.horizon=40", "window.k=2", "algo=bc", f"run_root={tmp_path / 'runs'}",
+                          "progress_bar=false", "threads=1", "demos.episodes=6", "eval.episodes=4", "eval.num_envs=4",
+                          "eval.final_episodes=8", "eval.trajectories=0", "algo.actor.hidden=16",
+                          "algo.actor.num_blocks=1", "algo.epochs=2", "algo.batch_size=64", "algo.eval_every=1"])
+    run(cfg)
+    (shipped,) = archive_runs(tmp_path / "runs", tmp_path / "policies", policies=True)
+    files = sorted(str(p.relative_to(shipped)) for p in shipped.rglob("*") if p.is_file())
+    assert "checkpoints/best.pt" in files and "checkpoints/last.pt" not in files and "config.yaml" in files
+    assert shipped.joinpath("checkpoints/best.pt").stat().st_size < 600_000
+    original, copy = (evaluate_run(path, "deploy", episodes=6, num_envs=3, seed=7, save=False)
+                      for path in (cfg.run_dir, shipped))
+    assert copy.returns == original.returns and copy.successes == original.successes
+    # A checkpoint that carries more than the policy is not shipped.
+    best = RunDirectory(cfg.run_dir).best_checkpoint
+    _torch.save({**_torch.load(best, weights_only=True), "critic": {}}, best)
+    with pytest.raises(CheckpointError, match="not the selected policy alone"):
+        archive_runs(tmp_path / "runs", tmp_path / "again", policies=True)

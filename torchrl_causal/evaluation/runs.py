@@ -21,7 +21,14 @@ from typing import Any, NamedTuple
 from omegaconf import OmegaConf
 
 from torchrl_causal.evaluation.metrics import EvaluationResult
-from torchrl_causal.experiment.run_directory import CONFIG_FILE, RunDirectory, atomic_write_text, run_label
+from torchrl_causal.experiment.run_directory import (
+    CONFIG_FILE,
+    CheckpointError,
+    RunDirectory,
+    atomic_save,
+    atomic_write_text,
+    run_label,
+)
 
 log = logging.getLogger(__name__)
 
@@ -33,6 +40,8 @@ __all__ = [
     "load_run",
     "load_runs",
     "archive_runs",
+    "copy_selected_policy",
+    "POLICY_CHECKPOINT_KEYS",
     "mean_curve",
 ]
 
@@ -169,7 +178,30 @@ def _complete_runs(root: Path) -> Iterator[RunDirectory]:
         yield run
 
 
-def archive_runs(root: str | Path, out: str | Path) -> list[Path]:
+#: What a selected-policy checkpoint (``checkpoints/best.pt``) holds: the actor's weights and
+#: where they were selected; no critic, optimiser or replay state.
+POLICY_CHECKPOINT_KEYS = frozenset({"progress", "train_return", "policy"})
+
+
+def copy_selected_policy(run: RunDirectory, target: RunDirectory) -> Path:
+    """Copies ``run``'s selected policy (``checkpoints/best.pt``) to ``target``, checking that it
+    holds the actor's weights only, and returns the copy's path.
+
+    Raises:
+        CheckpointError: the run has no selected policy, or its checkpoint holds more.
+    """
+    state = run.load_checkpoint(best=True)
+    if state is None:
+        raise CheckpointError(f"run {run.path} has no checkpoints/best.pt to ship")
+    if set(state) != POLICY_CHECKPOINT_KEYS:
+        raise CheckpointError(f"{run.best_checkpoint} holds {sorted(state)}, not the selected policy alone "
+                              f"({sorted(POLICY_CHECKPOINT_KEYS)})")
+    target.best_checkpoint.parent.mkdir(parents=True, exist_ok=True)
+    atomic_save(state, target.best_checkpoint)
+    return target.best_checkpoint
+
+
+def archive_runs(root: str | Path, out: str | Path, *, policies: bool = False) -> list[Path]:
     """Copies the record of every complete run below ``root`` to the same relative path
     below ``out`` and returns the archived run directories.
 
@@ -182,7 +214,10 @@ def archive_runs(root: str | Path, out: str | Path) -> list[Path]:
     one (a file the newer run lacks, such as an evaluation at a setting it was not
     evaluated at, belonged to an earlier run and is removed), every other run already in
     ``out`` is kept. Evaluating at settings no record holds
-    needs the original run directory (its ``checkpoints/best.pt``).
+    needs the original run directory (its ``checkpoints/best.pt``), or an archive made with
+    ``policies=True``: it also copies each run's selected policy (the actor's weights only,
+    under a megabyte at ``scale=cpu_ant``), so that
+    ``python -m torchrl_causal.evaluate run_dir=<archived run>`` evaluates it as it is.
 
     Raises:
         FileNotFoundError: ``root`` does not exist.
@@ -217,6 +252,8 @@ def archive_runs(root: str | Path, out: str | Path) -> list[Path]:
             destination = target / relative
             destination.parent.mkdir(parents=True, exist_ok=True)
             atomic_write_text(destination, (run.path / relative).read_text())
+        if policies:
+            record.add(copy_selected_policy(run, RunDirectory(target)).relative_to(target))
         if target.is_dir():  # what only an earlier run of this directory recorded (its other evaluations)
             for stale in [p for p in target.rglob("*") if p.is_file() and p.relative_to(target) not in record]:
                 stale.unlink()
