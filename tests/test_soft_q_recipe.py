@@ -249,9 +249,9 @@ def test_the_recipe_warm_starts_a_run_and_fixes_its_schedule_span(tmp_path, capl
     from hydra.utils import get_class
 
     from torchrl_causal.evaluation.evaluator import Evaluator
-    from torchrl_causal.train import run
-    from torchrl_causal.trainers import RunDirectory, compose_config
-    from torchrl_causal.trainers.builders import make_window
+    from torchrl_causal.experiment import RunDirectory, compose_config
+    from torchrl_causal.experiment.builders import make_window
+    from torchrl_causal.lifecycle import run
 
     cfg = compose_config([*RECIPE_TINY, f"run_root={tmp_path}"])
     assert cfg.demos.successful_only and cfg.algo.loss.goal_value == "expert" and cfg.algo.loss.bc_weight == 0.4
@@ -285,10 +285,9 @@ def test_the_recipe_warm_starts_a_run_and_fixes_its_schedule_span(tmp_path, capl
 def test_a_shipped_policy_directory_evaluates_as_its_run(tmp_path) -> None:
     import torch as _torch
 
-    from torchrl_causal.evaluate import evaluate_run
     from torchrl_causal.evaluation.runs import archive_runs
-    from torchrl_causal.train import run
-    from torchrl_causal.trainers import CheckpointError, RunDirectory, compose_config
+    from torchrl_causal.experiment import CheckpointError, RunDirectory, compose_config
+    from torchrl_causal.lifecycle import evaluate_run, run
 
     cfg = compose_config(["env=rovermaze_u", "env.horizon=40", "window.k=2", "algo=bc", f"run_root={tmp_path / 'runs'}",
                           "progress_bar=false", "threads=1", "demos.episodes=6", "eval.episodes=4", "eval.num_envs=4",
