@@ -445,9 +445,10 @@ def _check_expert(cfg: DictConfig) -> None:
     if cfg.env.expert is None:
         raise ConfigValueError(
             f"env {cfg.env.name!r} has no expert (env.expert is null), and every algorithm needs one "
-            "(demonstrations, or the expert row). HumanoidMaze's expert needs OGBench's humanoid locomotion "
-            "skill (~40M env steps), which this library does not ship yet; pass your own with "
-            "env.expert._target_=<module.Class taking the env>.")
+            "(demonstrations, or the expert row). HumanoidMaze's expert (HumanoidMazeExpert) needs its walking "
+            "skill's weights, which this library does not ship yet (`python -m torchrl_causal.envs.locomotion "
+            "--skill humanoid`, ~7-10 CPU-hours); then pass "
+            "env.expert._target_=torchrl_causal.envs.HumanoidMazeExpert, or your own class taking the env.")
 
 
 def _check_device(cfg: DictConfig) -> None:
