@@ -1,6 +1,7 @@
 # Two commands on a fresh machine: `make demo` (the main job) and `make test`.
 # The CPU build of torch is installed first so that no dependency pulls CUDA wheels; the
-# [cluster] extra (hydra-submitit-launcher, ~80 kB of pure Python) lets the tests sweep on it.
+# [cluster] extra (hydra-submitit-launcher, ~80 kB of pure Python) lets the tests sweep on it; the
+# [minari], [tensorboard], [wandb] and [video] extras let the tests of those features run.
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
@@ -12,7 +13,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q torch==2.13.0
-	$(PY) -m pip install -q -e '.[test,cluster]'
+	$(PY) -m pip install -q -e '.[test,cluster,minari,tensorboard,wandb,video]'
 	touch $(STAMP)
 
 install: $(STAMP)

@@ -48,6 +48,7 @@ from torchrl_causal.data.demonstrations import (
     load_demonstrations,
     read_metadata,
 )
+from torchrl_causal.extras import require_extra
 
 __all__ = ["METADATA_KEY", "export_minari", "from_minari_replay", "load_minari_demonstrations",
            "minari_dataset_dir", "read_minari_metadata", "replay_layout"]
@@ -57,15 +58,11 @@ METADATA_KEY = "torchrl_causal"
 # rebuilt from the episode boundaries.
 _STEP_KEYS = ("action", "done", "terminated", "truncated", "is_init", "episode")
 _NEXT_ONLY_KEYS = ("reward", "done", "terminated", "truncated")
-_INSTALL = "pip install 'torchrl-causal[minari]'"
 
 
 def _import_minari() -> Any:
-    try:
-        import minari
-    except ImportError as error:
-        raise ImportError(f"Minari datasets need the minari package: {_INSTALL}") from error
-    return minari
+    require_extra("Minari datasets", "h5py")  # Minari's HDF5 storage
+    return require_extra("Minari datasets", "minari")
 
 
 @contextmanager

@@ -20,11 +20,11 @@ from torchrl.record import VideoRecorder
 
 from torchrl_causal.evaluation.rendering import EpisodeOutcome, rendered_episode
 from torchrl_causal.evaluation.metrics import Policy
+from torchrl_causal.extras import require_extra
 
 __all__ = ["VIDEO_FORMATS", "VideoFile", "RecordedVideo", "record_video"]
 
 VIDEO_FORMATS = ("mp4", "gif")
-_INSTALL = "pip install 'torchrl-causal[video]'"
 
 
 class VideoFile:
@@ -55,10 +55,8 @@ class VideoFile:
     def log_video(self, name: str, video: torch.Tensor, step: int | None = None, **kwargs: object) -> None:
         """Writes ``video`` (``[1, T, C, H, W]`` or ``[T, C, H, W]`` uint8, as
         :class:`~torchrl.record.VideoRecorder` passes it); ``name`` and ``step`` are unused."""
-        try:
-            import imageio.v3 as iio
-        except ImportError as error:
-            raise ImportError(f"writing videos needs imageio: {_INSTALL}") from error
+        require_extra("writing videos", "imageio")
+        import imageio.v3 as iio
         frames = video.reshape(-1, *video.shape[-3:]).permute(0, 2, 3, 1).contiguous().numpy()
         fps = int(kwargs.get("fps", self.fps))
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -71,10 +69,7 @@ class VideoFile:
 def _write_mp4(path: Path, frames: np.ndarray, fps: int, crf: int = 17) -> None:
     """H.264 in yuv420p (what every player reads; it needs even sides); ``crf`` 17 is
     visually lossless."""
-    try:
-        import av
-    except ImportError as error:
-        raise ImportError(f"writing MP4 videos needs PyAV: {_INSTALL}") from error
+    av = require_extra("writing MP4 videos", "av")
     height, width = frames.shape[1:3]
     if height % 2 or width % 2:
         raise ValueError(f"an MP4 needs an even width and height, got {width}x{height}")
