@@ -74,7 +74,7 @@ def _targets(node: Any, where: str = "") -> Iterator[tuple[str, str]]:
 def test_groups_are_the_expected_ones() -> None:
     assert GROUPS["env"] == sorted(ENVS) and GROUPS["algo"] == sorted(ALGOS)
     assert GROUPS["window"] == ["default", "matched"] and GROUPS["scale"] == ["cpu", "cpu_ant", "paper"]
-    assert GROUPS["logger"] == ["csv", "tensorboard"]
+    assert GROUPS["logger"] == ["csv", "tensorboard", "wandb"]
 
 
 @pytest.mark.parametrize("env", GROUPS["env"])

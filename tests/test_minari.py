@@ -180,3 +180,34 @@ def test_missing_extra_names_it(exported, monkeypatch):
     monkeypatch.setitem(sys.modules, "minari", None)
     with pytest.raises(ImportError, match=r"pip install 'torchrl-causal\[minari\]'"):
         load_minari_demonstrations(exported[1])
+
+
+# ---------------------------------------------------------------- training from a Minari dataset
+
+
+def test_training_from_the_exported_set_equals_training_from_ours(tmp_path) -> None:
+    from test_trainers import tiny_config
+    from torchrl_causal.train import run
+
+    ours = tiny_config(tmp_path / "a", "route_choice", "bc", True)
+    results_ours = run(ours)
+    exported = export_minari(ours.demos.path, "route-choice-v0", root=tmp_path / "datasets")
+    from_minari = tiny_config(tmp_path / "b", "route_choice", "bc", True, f"demos.source=minari:{exported}")
+    results_minari = run(from_minari)
+    assert not (tmp_path / "b" / "_demos").exists()  # nothing collected
+    for regime in ("train", "deploy"):
+        assert results_minari[regime].returns == results_ours[regime].returns
+
+
+def test_a_run_refuses_a_minari_set_of_another_env_before_its_directory(tmp_path, exported) -> None:
+    from test_trainers import tiny_config
+    from torchrl_causal.train import run
+
+    cfg = tiny_config(tmp_path / "runs", "route_choice", "bc", True, f"demos.source=minari:{exported[1]}")
+    with pytest.raises(DatasetError, match="env.class"):
+        run(cfg)
+    assert not (tmp_path / "runs").exists()
+    bad = tiny_config(tmp_path / "runs", "route_choice", "bc", True, "demos.source=hf:some/set")
+    with pytest.raises(Exception, match=r"demos.source='hf:some/set' is not a source"):
+        run(bad)
+    assert not (tmp_path / "runs").exists()

@@ -28,7 +28,7 @@ from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.metrics import EvaluationResult
-from torchrl_causal.experiment.builders import make_window
+from torchrl_causal.experiment.builders import check_demonstrations, make_window
 from torchrl_causal.experiment.config import register_resolvers
 from torchrl_causal.experiment.device import resolve_device
 from torchrl_causal.experiment.interrupts import RunInterrupted, signals_raise
@@ -84,15 +84,20 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
 
     Raises:
         ConfigValueError: a value out of range (nothing is written).
+        DatasetError: demonstrations of another env, missing keys or corrupted (nothing is written).
         ConfigMismatchError: ``cfg.run_dir`` holds a run of another config (nothing is written).
         RunInUseError: another process is running ``cfg.run_dir`` (nothing is written).
-        RunInterrupted: on SIGINT/SIGTERM, after checkpointing and marking the run interrupted.
+        RunInterrupted: on SIGINT/SIGTERM/SIGUSR2, after checkpointing and marking the run interrupted.
     """
     validate_config(cfg)
     trainer_class: type[Trainer] | None = get_class(cfg.algo.trainer) if cfg.algo.trainer else None
     total = trainer_class.budget(cfg) if trainer_class else 0
     run_dir = RunDirectory(cfg.run_dir)
     created = _first_missing(run_dir.path)  # what a failure before any checkpoint removes
+    if trainer_class is not None and created is not None:
+        # A new run refuses bad demonstrations before its directory exists; an existing one
+        # was checked when it started (a changed config is refused by claim, naming the keys).
+        check_demonstrations(cfg)
     killed = run_dir.read_status().get("status") == "killed"
     with run_dir.lock():
         if killed and cfg.resume:

@@ -9,8 +9,8 @@ directory exists. ``scale=paper`` selects Appendix E's networks and budgets,
 
 Each job is :func:`torchrl_causal.lifecycle.run`: rerunning the same command resumes an
 unfinished run from its last checkpoint and returns a finished run's stored evaluations.
-Ctrl-C (SIGINT) or SIGTERM checkpoints, marks the run interrupted and prints the command
-that resumes it.
+Ctrl-C (SIGINT), SIGTERM or SIGUSR2 (SLURM's time-limit warning) checkpoints, marks the
+run interrupted and prints the command that resumes it.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
+from torchrl_causal.data import DatasetError
 from torchrl_causal.experiment.config import CONFIG_DIR, CONFIG_NAME
 from torchrl_causal.experiment.interrupts import RunInterrupted
 from torchrl_causal.experiment.run_directory import ConfigMismatchError, RunInUseError
@@ -35,7 +36,7 @@ def main(cfg: DictConfig) -> float:
     """Runs one job; returns its deploy-regime success rate (what a sweeper would optimise)."""
     try:
         results = run(cfg)
-    except (ConfigValueError, ConfigMismatchError, RunInUseError) as error:
+    except (ConfigValueError, ConfigMismatchError, RunInUseError, DatasetError) as error:
         raise SystemExit(f"error: {error}") from None
     except RunInterrupted as stop:
         command = " ".join(["python -m torchrl_causal.train", *HydraConfig.get().overrides.task])

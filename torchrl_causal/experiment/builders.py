@@ -34,6 +34,7 @@ __all__ = [
     "make_policy",
     "make_expert",
     "load_or_collect_demonstrations",
+    "check_demonstrations",
     "expert_transitions",
     "observation_dim",
     "TRANSITION_KEYS",
@@ -144,21 +145,23 @@ def make_expert(cfg: DictConfig, env: EnvBase) -> Callable[[TensorDictBase], Ten
 
 
 def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
-    """Loads the demonstration set at ``cfg.demos.path``, collecting it with the expert first
-    if it does not exist yet (train regime, ``cfg.demos.episodes`` episodes); with
+    """The demonstrations of ``cfg.demos``: a Minari dataset when ``cfg.demos.source`` is
+    ``minari:<id or path>``, else the set at ``cfg.demos.path``, collected with the expert
+    first if it does not exist yet (train regime, ``cfg.demos.episodes`` episodes); with
     ``cfg.demos.successful_only`` only its episodes that reached the goal are returned.
 
     The set must have been recorded in this config's train-regime env (same maze,
-    horizon, strength): :func:`~torchrl_causal.data.load_demonstrations` refuses others.
+    horizon, strength): :func:`~torchrl_causal.data.sources.load_source` refuses others.
     Collection is atomic, so runs started side by side may both collect; one identical
     set wins and the other run loads it. Collection leaves torch's random state as it
     found it, so a run that collects the set trains exactly as one that loads it.
     """
-    from torchrl_causal.data import collect_demonstrations, load_demonstrations, successful_episodes
+    from torchrl_causal.data import collect_demonstrations, successful_episodes
+    from torchrl_causal.data.sources import load_source, minari_reference
 
     path = Path(cfg.demos.path)
     reference = make_env(cfg, "train", 1, cfg.demos.seed)
-    if not path.exists():
+    if minari_reference(cfg.demos.source) is None and not path.exists():
         episodes = cfg.demos.episodes
         env = make_env(cfg, "train", min(episodes, 64), cfg.demos.seed)
         # The expert seeds itself from the global generator: without the fork, whether this
@@ -173,13 +176,26 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
             # Another run finished collecting the same set first (rename onto its folder failed).
         finally:
             env.close()
-    demonstrations = load_demonstrations(path, expected=reference)
+    demonstrations = load_source(cfg.demos.source, path, expected=reference)
     if not cfg.demos.successful_only:
         return demonstrations
     kept = successful_episodes(demonstrations)
     log.info("demos.successful_only: %d of %d demonstration episodes reached the goal (%d of %d transitions kept)",
              int(kept["is_init"].sum()), int(demonstrations["is_init"].sum()), kept.shape[0], demonstrations.shape[0])
     return kept
+
+
+def check_demonstrations(cfg: DictConfig) -> None:
+    """Refuses the demonstrations of ``cfg.demos`` before a run starts (see
+    :func:`~torchrl_causal.data.sources.check_source`): a wrong env, a missing key,
+    corrupted data. A set still to be collected passes."""
+    from torchrl_causal.data.sources import check_source
+
+    env = make_env(cfg, "train", 1, cfg.demos.seed)
+    try:
+        check_source(cfg.demos.source, cfg.demos.path, env)
+    finally:
+        env.close()
 
 
 def expert_transitions(window: AdjustmentWindow, demonstrations: TensorDictBase) -> TensorDict:

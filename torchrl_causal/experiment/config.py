@@ -19,6 +19,8 @@ Examples:
 
 from __future__ import annotations
 
+import hashlib
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -33,10 +35,38 @@ CONFIG_DIR = Path(__file__).resolve().parents[1] / "conf"
 CONFIG_NAME = "config"
 
 
+def stable_id(text: str) -> str:
+    """A 16-character id that depends on ``text`` only (``${stable_id:${run_dir}}``: the W&B
+    run of a run directory, the same across resumes and requeues).
+
+    Examples:
+        >>> stable_id("runs/route_choice/seed0") == stable_id("runs/route_choice/seed0") != stable_id("runs/x")
+        True
+        >>> len(stable_id("runs/x"))
+        16
+    """
+    return hashlib.sha1(str(text).encode()).hexdigest()[:16]
+
+
+def product(*factors: int) -> int:
+    """``${product:${threads},${collector_workers}}``: the cores a run uses.
+
+    Examples:
+        >>> product(2, 3)
+        6
+    """
+    return math.prod(int(factor) for factor in factors)
+
+
+_RESOLVERS = {"run_label": run_label, "stable_id": stable_id, "product": product}
+
+
 def register_resolvers() -> None:
-    """Registers ``${run_label:algo,causal,window_matched,drop}`` and the schemas (idempotent)."""
-    if not OmegaConf.has_resolver("run_label"):
-        OmegaConf.register_new_resolver("run_label", run_label)
+    """Registers ``${run_label:algo,causal,window_matched,drop}``, ``${stable_id:...}``,
+    ``${product:...}`` and the schemas (idempotent)."""
+    for name, resolver in _RESOLVERS.items():
+        if not OmegaConf.has_resolver(name):
+            OmegaConf.register_new_resolver(name, resolver)
     register_configs()
 
 

@@ -51,6 +51,9 @@ __all__ = [
     "IQLearnConfig",
     "IQLearnVariant",
     "LoggerConfig",
+    "WandbLoggerConfig",
+    "LOGGER_SCHEMAS",
+    "LOGGER_MODULES",
     "OffPolicyConfig",
     "WindowConfig",
     "WindowMode",
@@ -295,6 +298,7 @@ class DemosConfig:
     seed: int = at_least(0)
     path: str = MISSING
     successful_only: bool = MISSING
+    source: Optional[str] = MISSING  # null: our format at path; minari:<dataset id or path>
 
 
 @dataclass
@@ -302,6 +306,27 @@ class LoggerConfig(Target):
     """A TorchRL logger; the run directory passes ``log_dir``."""
 
     exp_name: str = MISSING
+
+
+@dataclass
+class WandbLoggerConfig(LoggerConfig):
+    """TorchRL's ``WandbLogger``: ``exp_name`` is the W&B run's name, ``id`` its id (a
+    resumed run keeps logging to the same W&B run)."""
+
+    offline: bool = MISSING
+    project: Optional[str] = MISSING
+    id: Optional[str] = MISSING
+
+
+#: Schema of each ``configs/logger`` option that has keys beyond ``LoggerConfig``'s, stored
+#: in the ``logger`` group as ``schema_<name>``.
+LOGGER_SCHEMAS: dict[str, type[LoggerConfig]] = {"wandb": WandbLoggerConfig}
+
+#: The optional package each logger needs (``_target_`` -> the ``logger=`` option and the module).
+LOGGER_MODULES: dict[str, tuple[str, str]] = {
+    "torchrl.record.loggers.TensorboardLogger": ("tensorboard", "tensorboard"),
+    "torchrl.record.loggers.WandbLogger": ("wandb", "wandb"),
+}
 
 
 @dataclass
@@ -419,6 +444,8 @@ def register_configs() -> None:
     store.store(name="schema", node=Config)
     for name, schema in ALGO_SCHEMAS.items():
         store.store(group="algo", name=f"schema_{name}", node=schema)
+    for name, schema in LOGGER_SCHEMAS.items():
+        store.store(group="logger", name=f"schema_{name}", node=schema)
 
 
 # ---------------------------------------------------------------------- ranges
@@ -483,6 +510,19 @@ def _check_target_entropy(cfg: DictConfig) -> None:
         raise ConfigValueError(f"config value algo.loss.target_entropy={value!r} must be 'auto' or a number")
 
 
+def _check_extras(cfg: DictConfig) -> None:
+    """An optional package the config needs (a logger's, Minari's) is installed."""
+    from torchrl_causal.data.sources import source_problem
+    from torchrl_causal.extras import missing_extra
+
+    if cfg.logger._target_ in LOGGER_MODULES:
+        choice, module = LOGGER_MODULES[cfg.logger._target_]
+        if message := missing_extra(f"logger={choice}", module):
+            raise ConfigValueError(message)
+    if message := source_problem(cfg.demos.source):
+        raise ConfigValueError(message)
+
+
 def validate_config(cfg: DictConfig) -> None:
     """Resolves every interpolation of a composed config and checks every range.
 
@@ -490,7 +530,9 @@ def validate_config(cfg: DictConfig) -> None:
         ConfigValueError: naming the key, its value and the allowed range; a device this
             machine lacks; ``compile=true`` where torch.compile cannot run; GAIL's actor with dropout; off-policy counts that do not
             divide (``random_steps`` by ``frames_per_batch``, ``num_envs`` by
-            ``collector_workers``); or the env without an expert.
+            ``collector_workers``); the env without an expert; a logger or a
+            ``demos.source`` whose package is not installed (naming the extra), or a
+            malformed ``demos.source``.
         omegaconf.errors.OmegaConfBaseException: an interpolation that does not resolve or
             a mandatory value left unset, naming the key.
 
@@ -507,3 +549,4 @@ def validate_config(cfg: DictConfig) -> None:
     _check_algorithm(cfg)
     _check_target_entropy(cfg)
     _check_expert(cfg)
+    _check_extras(cfg)

@@ -32,7 +32,7 @@ from omegaconf import DictConfig, OmegaConf
 from tensordict.nn import TensorDictModuleBase
 from torchrl.record.loggers import Logger
 
-from torchrl_causal.data import read_metadata
+from torchrl_causal.data.sources import source_checksum
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.progress import progress
 from torchrl_causal.experiment.device import resolve_device
@@ -245,7 +245,8 @@ class Trainer(ABC):
         self.logger = instantiate(self.cfg.logger)(log_dir=str(self.run.path))
         if resumed:
             log.info("resumed %s at %d %s", self.run.path, self.progress, self.unit)
-        identity = attempt_identity(read_metadata(self.cfg.demos.path)["checksum"], self.cfg.compile, self.device)
+        identity = attempt_identity(source_checksum(self.cfg.demos.source, self.cfg.demos.path), self.cfg.compile,
+                                    self.device)
         previous = self.run.record_attempt(identity, self.progress)
         changes = identity_changes(previous, identity) if resumed and previous is not None else {}
         if changes:
@@ -258,6 +259,7 @@ class Trainer(ABC):
             self._loop(label)
         finally:
             self.close()
+            self.logger.close()  # flushes; W&B finishes its run (a resume continues it), TensorBoard closes its file
 
     def _loop(self, label: str) -> None:
         every = self.cfg.algo.eval_every
