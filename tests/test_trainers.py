@@ -254,16 +254,16 @@ def test_out_of_range_values_fail_before_a_run_directory_exists(tmp_path: Path, 
 
 
 @contextmanager
-def _interrupt_at(trainer_class, step: int):
-    """Sends SIGINT to this process at the end of the ``step``-th training iteration, as
-    Ctrl-C would (the trainer's handler must let the iteration finish)."""
+def _interrupt_at(trainer_class, step: int, number: int = signal.SIGINT):
+    """Sends SIGINT (or ``number``) to this process at the end of the ``step``-th training
+    iteration, as Ctrl-C would (the trainer's handler must let the iteration finish)."""
     original, calls = trainer_class.train_step, []
 
     def train_step(trainer):
         scalars = original(trainer)
         calls.append(1)
         if len(calls) == step:
-            signal.raise_signal(signal.SIGINT)
+            signal.raise_signal(number)
         return scalars
 
     trainer_class.train_step = train_step

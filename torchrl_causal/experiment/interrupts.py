@@ -1,4 +1,4 @@
-"""SIGINT / SIGTERM for runs: finish the step in flight, checkpoint, say how to resume.
+"""SIGINT / SIGTERM / SIGUSR2 for runs: finish the step in flight, checkpoint, say how to resume.
 
 A training iteration interrupted half-way (a collector between env steps, an optimiser
 between parameter groups) leaves nothing worth saving, so :func:`deferred_signals`
@@ -7,6 +7,11 @@ raises :class:`RunInterrupted`. A second signal stops at once. Outside training
 (building envs, the final evaluation) :func:`signals_raise` turns both signals into
 :class:`RunInterrupted` straight away, so that SIGTERM, too, unwinds through the code
 that marks the run interrupted instead of killing the process where it stands.
+
+SIGUSR2 is what SLURM sends ahead of a job's time limit (``--signal=USR2@<s>``) and
+submitit on pre-emption. Under a job scheduler another handler may already be installed
+for these signals (submitit's requeues the job); :func:`signals_raise` calls it once the
+run has checkpointed and marked itself interrupted, so the job is requeued and resumes.
 
 Handlers can only be installed from the main thread; elsewhere both context managers
 change nothing.
@@ -26,7 +31,7 @@ __all__ = ["RunInterrupted", "DeferredSignals", "deferred_signals", "signals_rai
 
 log = logging.getLogger(__name__)
 
-_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGUSR2)
 
 
 class RunInterrupted(Exception):
@@ -54,13 +59,14 @@ Handler = Callable[[int, FrameType | None], None]
 
 
 @contextmanager
-def _handlers(handler: Handler) -> Iterator[None]:
+def _handlers(handler: Handler) -> Iterator[dict[int, object]]:
+    """Installs ``handler`` for the run's signals; yields the handlers it replaced."""
     if threading.current_thread() is not threading.main_thread():
-        yield
+        yield {}
         return
     previous = {number: signal.signal(number, handler) for number in _SIGNALS}
     try:
-        yield
+        yield previous
     finally:
         for number, old in previous.items():
             signal.signal(number, old)
@@ -70,16 +76,49 @@ def _raise(number: int, frame: FrameType | None) -> None:
     raise RunInterrupted(number)
 
 
+def _chained(handler: object) -> bool:
+    """Whether ``handler`` is another program's Python handler to pass the signal on to
+    (not the default action, ignoring, or Python's KeyboardInterrupt)."""
+    return callable(handler) and handler is not signal.default_int_handler
+
+
 @contextmanager
 def signals_raise() -> Iterator[None]:
-    """SIGINT and SIGTERM raise :class:`RunInterrupted` where the program stands."""
-    with _handlers(_raise):
-        yield
+    """SIGINT, SIGTERM and SIGUSR2 raise :class:`RunInterrupted` where the program stands.
+
+    When the block ends on :class:`RunInterrupted` (the run saved what it had and marked
+    itself interrupted), the handler that was installed before for that signal, if it is a
+    Python function (submitit's, which requeues the job), is called with it.
+
+    Examples:
+        >>> import os
+        >>> received = []
+        >>> previous = signal.signal(signal.SIGUSR2, lambda number, frame: received.append(number))
+        >>> try:
+        ...     with signals_raise():
+        ...         os.kill(os.getpid(), signal.SIGUSR2)
+        ... except RunInterrupted as stop:
+        ...     print(stop, received == [signal.SIGUSR2])
+        interrupted by SIGUSR2 True
+        >>> _ = signal.signal(signal.SIGUSR2, previous)
+    """
+    with _handlers(_raise) as previous:
+        try:
+            yield
+        except RunInterrupted as stop:
+            handler = previous.get(stop.signal_number)
+            if not _chained(handler):
+                raise
+            signal.signal(stop.signal_number, handler)
+            log.warning("%s: passing it on to the handler that was installed before the run (%s)", stop.signal_name,
+                        getattr(handler, "__qualname__", handler))
+            handler(stop.signal_number, None)
+            raise
 
 
 @dataclass
 class DeferredSignals:
-    """The first SIGINT / SIGTERM received inside :func:`deferred_signals` (``None``: none)."""
+    """The first SIGINT / SIGTERM / SIGUSR2 received inside :func:`deferred_signals` (``None``: none)."""
 
     received: int | None = None
 
@@ -93,7 +132,7 @@ class DeferredSignals:
 
 @contextmanager
 def deferred_signals() -> Iterator[DeferredSignals]:
-    """Records SIGINT / SIGTERM instead of acting on them; a second one raises
+    """Records SIGINT / SIGTERM / SIGUSR2 instead of acting on them; a second one raises
     :class:`RunInterrupted` at once.
 
     Examples:
