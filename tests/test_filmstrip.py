@@ -70,3 +70,14 @@ def test_cli_draws_one_row_per_run_from_the_same_start(tmp_path, capsys):
     np.testing.assert_array_equal(*starts)  # one seed: every row starts from the same state
     with pytest.raises(SystemExit, match="labels"):
         main([f"runs=[{bc.run_dir}]", "labels=[a,b]", f"out={out}"])
+    # One video per run, named after its label; the same episode as the strip's.
+    videos = tmp_path / "videos"
+    main([f"runs=[{bc.run_dir},{expert.run_dir}]", "labels=[C-BC,Expert]", f"out={videos}", "format=gif", "every=15",
+          "size=32"])
+    assert sorted(path.name for path in videos.iterdir()) == ["C-BC.gif", "Expert.gif"]
+    import imageio.v3 as iio
+    frames = iio.imread(videos / "Expert.gif", index=None)
+    assert np.abs(frames[0].astype(int) - starts[1].astype(int)).mean() < 3  # GIF's palette: close, not equal
+    assert frames.shape[0] == len(filmstrip_of_run(expert.run_dir, frames=1000, every=15, size=32).frames)
+    with pytest.raises(SystemExit, match="format=avi is not one of png, mp4, gif"):
+        main([f"runs=[{bc.run_dir}]", f"out={videos}", "format=avi"])

@@ -1,5 +1,8 @@
 """Frame strips of one evaluation episode per run, rendered offscreen, one row per run:
-``python -m torchrl_causal.filmstrip runs=[<dir>,<dir>] labels=[C-SQIL,SQIL] out=strip.png``.
+``python -m torchrl_causal.filmstrip runs=[<dir>,<dir>] labels=[C-SQIL,SQIL] out=strip.png``;
+or a video of that episode per run, ``format=mp4`` or ``format=gif`` (the ``[video]`` extra):
+``out`` is then a folder that gets ``<label>.mp4`` for each run (every ``every``-th step
+is a frame, at ``fps`` frames per second).
 
 Each run's selected policy (``checkpoints/best.pt``; the expert row rebuilds its expert)
 acts in one ``regime`` episode (default ``deploy``) seeded with ``seed``, in the
@@ -11,56 +14,99 @@ Needs a MuJoCo maze env and an offscreen GL context (EGL on a headless machine).
 
 from __future__ import annotations
 
+import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 from omegaconf import OmegaConf
+from torchrl.envs import EnvBase
 
-from torchrl_causal.lifecycle import open_run
+from torchrl_causal.evaluation.metrics import Policy
 from torchrl_causal.evaluation.rendering import Filmstrip, record_filmstrip, save_filmstrips
+from torchrl_causal.evaluation.video import VIDEO_FORMATS, RecordedVideo, record_video
+from torchrl_causal.lifecycle import open_run
 
-__all__ = ["filmstrip_of_run", "main"]
+__all__ = ["filmstrip_of_run", "main", "video_of_run"]
 
-_ARGS = {"runs", "labels", "out", "regime", "seed", "frames", "every", "size", "camera"}
+_ARGS = {"runs", "labels", "out", "regime", "seed", "frames", "every", "size", "camera", "format", "fps"}
 
 
-def filmstrip_of_run(run_dir: str | Path, *, regime: str = "deploy", seed: int = 0, frames: int = 6,
-                     every: int = 10, size: int = 240, camera: str | None = None) -> Filmstrip:
-    """One ``regime`` episode of the selected policy of ``run_dir`` (see the module docstring)."""
+@contextmanager
+def _episode_of_run(run_dir: str | Path, regime: str, seed: int) -> Iterator[tuple[EnvBase, Policy, int]]:
+    """The imitator's env of ``run_dir`` (batch 1, seeded), its selected policy acting in
+    it (the expert for the expert row) and the episode limit."""
     _, evaluator, policy = open_run(run_dir, device="cpu")
     env = evaluator.make_env(regime, 1, seed)
     try:
         if policy is not None:
             policy.eval()  # no dropout
-        acting = evaluator.acting_policy(policy, env)
-        return record_filmstrip(env, acting, max_steps=evaluator.cfg.env.horizon, frames=frames, every=every,
-                                width=size, height=size, camera=camera)
+        yield env, evaluator.acting_policy(policy, env), evaluator.cfg.env.horizon
     finally:
         env.close()
+
+
+def filmstrip_of_run(run_dir: str | Path, *, regime: str = "deploy", seed: int = 0, frames: int = 6,
+                     every: int = 10, size: int = 240, camera: str | None = None) -> Filmstrip:
+    """One ``regime`` episode of the selected policy of ``run_dir`` (see the module docstring)."""
+    with _episode_of_run(run_dir, regime, seed) as (env, acting, horizon):
+        return record_filmstrip(env, acting, max_steps=horizon, frames=frames, every=every, width=size, height=size,
+                                camera=camera)
+
+
+def video_of_run(run_dir: str | Path, path: str | Path, *, regime: str = "deploy", seed: int = 0, every: int = 1,
+                 fps: int = 30, size: int = 240, camera: str | None = None) -> RecordedVideo:
+    """The same episode as :func:`filmstrip_of_run`, as a video at ``path`` (``.mp4`` / ``.gif``)."""
+    with _episode_of_run(run_dir, regime, seed) as (env, acting, horizon):
+        return record_video(env, acting, path, max_steps=horizon, every=every, fps=fps, width=size, height=size,
+                            camera=camera)
+
+
+def _file_name(label: str) -> str:
+    return re.sub(r"[^\w.-]+", "_", label).strip("_") or "run"
+
+
+def _record_all(runs: list[str], labels: list[str], record: Callable[[str, str], Any]) -> dict[str, Any]:
+    recorded = {}
+    for label, run in zip(labels, runs):
+        result = record(label, run)
+        outcome = f"goal at step {result.length}" if result.success else f"no goal in {result.length} steps"
+        print(f"{label}: {run} {outcome}")
+        recorded[label] = result
+    return recorded
 
 
 def main(argv: Sequence[str] | None = None) -> Path:
     args = OmegaConf.from_cli(list(sys.argv[1:] if argv is None else argv))
     unknown = set(args) - _ARGS
     if unknown or "runs" not in args or "out" not in args:
-        raise SystemExit("usage: python -m torchrl_causal.filmstrip runs=[<dir>,...] out=<png> [labels=[...]] "
-                         "[regime=deploy] [seed=0] [frames=6] [every=10] [size=240] [camera=<name>]"
+        raise SystemExit("usage: python -m torchrl_causal.filmstrip runs=[<dir>,...] out=<png, or a folder for videos> "
+                         "[labels=[...]] [format=png|mp4|gif] [regime=deploy] [seed=0] [frames=6] [every=10 (png), "
+                         "1 (videos)] [fps=30] [size=240] [camera=<name>]"
                          + (f"; unknown argument(s) {sorted(unknown)}" if unknown else ""))
     runs = [str(run) for run in args.runs]
     labels = [str(label) for label in args.get("labels", runs)]
     if len(labels) != len(runs):
         raise SystemExit(f"labels names {len(labels)} rows for {len(runs)} runs")
-    options = {key: args[key] for key in ("regime", "seed", "frames", "every", "size", "camera") if key in args}
-    strips = {}
-    for label, run in zip(labels, runs):
-        strip = filmstrip_of_run(run, **options)
-        outcome = f"goal at step {strip.length}" if strip.success else f"no goal in {strip.length} steps"
-        print(f"{label}: {run} [{options.get('regime', 'deploy')}] {outcome}")
-        strips[label] = strip
-    path = save_filmstrips(strips, args.out)
-    print(f"wrote {path}")
-    return path
+    fmt = str(args.get("format", "png"))
+    if fmt not in ("png", *VIDEO_FORMATS):
+        raise SystemExit(f"format={fmt} is not one of png, {', '.join(VIDEO_FORMATS)}")
+    episode = {key: args[key] for key in ("regime", "seed", "every", "size", "camera") if key in args}
+    if fmt == "png":
+        strips = _record_all(runs, labels, lambda label, run: filmstrip_of_run(
+            run, **episode, **({"frames": args.frames} if "frames" in args else {})))
+        path = save_filmstrips(strips, args.out)
+        print(f"wrote {path}")
+        return path
+    folder = Path(args.out)
+    if len({_file_name(label) for label in labels}) != len(labels):
+        raise SystemExit(f"labels {labels} do not give one file name each")
+    _record_all(runs, labels, lambda label, run: video_of_run(
+        run, folder / f"{_file_name(label)}.{fmt}", **episode, **({"fps": args.fps} if "fps" in args else {})))
+    print(f"wrote {len(runs)} {fmt} file(s) to {folder}")
+    return folder
 
 
 if __name__ == "__main__":
