@@ -12,8 +12,8 @@ import pytest
 
 from test_trainers import tiny_config
 from torchrl_causal.evaluation.runs import read_scalar_csv
-from torchrl_causal.train import run
-from torchrl_causal.trainers import ConfigValueError
+from torchrl_causal.lifecycle import run
+from torchrl_causal.experiment import ConfigValueError
 
 BC = ("algo.epochs=4", "algo.eval_every=2")
 

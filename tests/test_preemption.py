@@ -11,8 +11,8 @@ import pytest
 from hydra.utils import get_class
 
 from test_trainers import _interrupt_at, tiny_config
-from torchrl_causal.train import run
-from torchrl_causal.trainers import RunDirectory, RunInterrupted
+from torchrl_causal.lifecycle import run
+from torchrl_causal.experiment import RunDirectory, RunInterrupted
 
 BC = ("algo.epochs=4", "algo.eval_every=2", "checkpoint_every_s=3600")
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from torchrl_causal.trainers import compose_config
+from torchrl_causal.experiment import compose_config
 
 pytest.importorskip("hydra_plugins.hydra_submitit_launcher",
                     reason="hydra-submitit-launcher is not installed: pip install 'torchrl-causal[cluster]'")
@@ -28,7 +28,7 @@ exit 1
 
 def _launcher(*overrides: str):
     from hydra import compose, initialize_config_dir
-    from torchrl_causal.trainers.config import CONFIG_DIR, CONFIG_NAME
+    from torchrl_causal.experiment.config import CONFIG_DIR, CONFIG_NAME
 
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
         cfg = compose(config_name=CONFIG_NAME, overrides=["hydra/launcher=slurm", *overrides], return_hydra_config=True)

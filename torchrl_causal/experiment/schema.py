@@ -318,7 +318,7 @@ class WandbLoggerConfig(LoggerConfig):
     id: Optional[str] = MISSING
 
 
-#: Schema of each ``configs/logger`` option that has keys beyond ``LoggerConfig``'s, stored
+#: Schema of each ``conf/logger`` option that has keys beyond ``LoggerConfig``'s, stored
 #: in the ``logger`` group as ``schema_<name>``.
 LOGGER_SCHEMAS: dict[str, type[LoggerConfig]] = {"wandb": WandbLoggerConfig}
 
