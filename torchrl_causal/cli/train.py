@@ -22,7 +22,7 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
 from torchrl_causal.data import DatasetError
-from torchrl_causal.experiment.config import CONFIG_DIR, CONFIG_NAME
+from torchrl_causal.experiment.config import CONFIG_NAME, CONFIG_PATH
 from torchrl_causal.experiment.interrupts import RunInterrupted
 from torchrl_causal.experiment.run_directory import ConfigMismatchError, RunInUseError
 from torchrl_causal.experiment.schema import ConfigValueError
@@ -31,7 +31,7 @@ from torchrl_causal.lifecycle import run
 __all__ = ["main"]
 
 
-@hydra.main(config_path=str(CONFIG_DIR), config_name=CONFIG_NAME, version_base="1.3")
+@hydra.main(config_path=CONFIG_PATH, config_name=CONFIG_NAME, version_base="1.3")
 def main(cfg: DictConfig) -> float:
     """Runs one job; returns its deploy-regime success rate (what a sweeper would optimise)."""
     try:

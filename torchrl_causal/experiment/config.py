@@ -29,8 +29,12 @@ from omegaconf import DictConfig, OmegaConf
 from torchrl_causal.experiment.run_directory import run_label
 from torchrl_causal.experiment.schema import register_configs
 
-__all__ = ["CONFIG_DIR", "CONFIG_NAME", "register_resolvers", "compose_config"]
+__all__ = ["CONFIG_DIR", "CONFIG_MODULE", "CONFIG_NAME", "CONFIG_PATH", "register_resolvers", "compose_config"]
 
+#: The package that holds the tree, and Hydra's search path for it (works from a wheel).
+CONFIG_MODULE = "torchrl_causal.conf"
+CONFIG_PATH = f"pkg://{CONFIG_MODULE}"
+#: The same tree as a folder, for reading its files (the groups' options, say).
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "conf"
 CONFIG_NAME = "config"
 
@@ -80,12 +84,12 @@ def compose_config(overrides: Sequence[str] = ()) -> DictConfig:
         hydra.errors.ConfigCompositionException: a value of the wrong type, an unknown
             key or an unknown group option, naming it.
     """
-    from hydra import compose, initialize_config_dir
+    from hydra import compose, initialize_config_module
 
     if not (CONFIG_DIR / f"{CONFIG_NAME}.yaml").is_file():
-        raise FileNotFoundError(f"Hydra config tree not found at {CONFIG_DIR}")
+        raise FileNotFoundError(f"Hydra config tree not found at {CONFIG_DIR}: the package was installed without its data")
     register_resolvers()
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+    with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3"):
         return compose(config_name=CONFIG_NAME, overrides=list(overrides))
 
 
