@@ -31,6 +31,7 @@ from tensordict.utils import NestedKey
 from torchrl.objectives import ClipPPOLoss, GAILLoss
 from torchrl.objectives.utils import ValueEstimators
 
+from torchrl_causal.compat import reduce_loss
 from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingIndicator
 from torchrl_causal.objectives.utils import eval_mode
 
@@ -149,7 +150,7 @@ class GAILDiscriminatorLoss(GAILLoss):
             gp_loss = self.gp_lambda * self.gradient_penalty(expert_obs, expert_act, policy_obs, policy_act, flags)
             loss = loss + gp_loss
             out["gp_loss"] = gp_loss.detach()
-        out["loss"] = self._reduce_loss(loss, tensordict=tensordict)
+        out["loss"] = reduce_loss(self, loss, tensordict)
         return TensorDict(out)
 
     def gradient_penalty(self, expert_obs: torch.Tensor, expert_act: torch.Tensor, policy_obs: torch.Tensor,

@@ -12,8 +12,8 @@ from tensordict.utils import NestedKey
 from torchrl.data import Bounded, Composite, TensorSpec, Unbounded
 from torchrl.envs import EnvBase, Transform, TransformedEnv
 from torchrl.envs.batched_envs import BatchedEnvBase
-from torchrl.envs.transforms.utils import _get_reset
 
+from torchrl_causal.compat import reset_mask
 from torchrl_causal.graphs.template import TimeSliceTemplate
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.transforms._layout import FeatureSlice, LagRing, WindowLayout, spec_bounds
@@ -325,7 +325,7 @@ class CausalWindowTransform(Transform):
         layout = self._require_layout()
         batch = tensordict_reset.batch_size
         states = self._read_states(tensordict_reset, batch, layout)
-        reset = _get_reset(self.reset_key, tensordict)
+        reset = reset_mask(self.reset_key, tensordict)
         ring = self._ring
         if ring is None or ring.batch_size != batch or bool(reset.all()):
             ring = self._ring = LagRing(layout, states.to(self._dtype))

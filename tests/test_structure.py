@@ -1,0 +1,193 @@
+"""The package's layout, read from its own imports (``ast``, nothing is run).
+
+Sub-packages stand on floors: one imports only those on lower floors (``LAYERS``), so a
+reader can learn the package from the ground up; there is no import cycle between
+modules; no command line shares its name with a library module; and no module reads
+another module's private names.
+"""
+
+from __future__ import annotations
+
+import ast
+import functools
+import re
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "torchrl_causal"
+NAME = PACKAGE.name
+
+#: The floors, ground first: a unit (a sub-package, or a module at the package root)
+#: imports only units of lower floors. ``envs`` stands on ``experiment`` because the ant
+#: skill's trainer (``envs/locomotion.py``) checkpoints with the run directory's helpers.
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("graphs", "progress", "compat", "conf"),
+    ("modules", "objectives", "transforms", "data"),
+    ("experiment",),
+    ("envs",),
+    ("trainers", "evaluation"),
+    ("lifecycle",),
+    ("cli",),
+    ("train", "evaluate", "report", "status", "archive", "demo", "filmstrip", "strength_ablation"),  # README paths
+)
+FLOOR = {unit: floor for floor, units in enumerate(LAYERS) for unit in units}
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _unit(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def _type_checking_lines(tree: ast.Module) -> set[int]:
+    """Line numbers of the imports under ``if TYPE_CHECKING:`` (annotations only, no runtime edge)."""
+    lines = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            lines.update(inner.lineno for stmt in node.body for inner in ast.walk(stmt) if hasattr(inner, "lineno"))
+    return lines
+
+
+def imports(path: Path) -> Iterator[tuple[str, tuple[str, ...], bool]]:
+    """(imported module, names taken from it, at runtime?) for every import of ``path``,
+    module-level or inside a function."""
+    return iter(_imports(path))
+
+
+@functools.cache
+def _imports(path: Path) -> tuple[tuple[str, tuple[str, ...], bool], ...]:
+    return tuple(_read_imports(path))
+
+
+def _read_imports(path: Path) -> Iterator[tuple[str, tuple[str, ...], bool]]:
+    tree = ast.parse(path.read_text())
+    annotations_only = _type_checking_lines(tree)
+    here = _module_name(path).split(".")
+    package = here if path.name == "__init__.py" else here[:-1]
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, (), node.lineno not in annotations_only
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - node.level + 1]
+                module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            yield module, tuple(alias.name for alias in node.names), node.lineno not in annotations_only
+
+
+SOURCES = sorted(PACKAGE.rglob("*.py"))
+
+
+def _edges(runtime_only: bool = False) -> dict[str, set[str]]:
+    """Module -> the package's modules it imports (a ``from package import name`` that names
+    a submodule counts as importing that submodule)."""
+    modules = {_module_name(path) for path in SOURCES}
+    edges: dict[str, set[str]] = {}
+    for path in SOURCES:
+        targets = set()
+        for module, names, runtime in imports(path):
+            if not module.startswith(NAME) or (runtime_only and not runtime):
+                continue
+            submodules = {f"{module}.{name}" for name in names} & modules
+            targets |= submodules or {module}
+        edges[_module_name(path)] = targets - {_module_name(path)}
+    return edges
+
+
+def test_every_unit_has_a_floor() -> None:
+    units = {_unit(_module_name(path)) for path in SOURCES} - {"__init__"}
+    assert units <= set(FLOOR), f"place {sorted(units - set(FLOOR))} in LAYERS"
+
+
+def _upward(edges: dict[str, set[str]]) -> list[str]:
+    """The imports of ``edges`` that reach the importer's own floor or a higher one."""
+    return sorted(
+        f"{module} -> {target}"
+        for module, targets in edges.items()
+        for target in targets
+        if _unit(module) != "__init__" and _unit(target) != _unit(module)
+        and FLOOR.get(_unit(target), len(LAYERS)) >= FLOOR[_unit(module)]
+    )
+
+
+def test_upward_finds_an_import_from_a_lower_floor() -> None:
+    edges = {f"{NAME}.trainers.bc": {f"{NAME}.experiment.builders", f"{NAME}.trainers.base"},
+             f"{NAME}.evaluation.metrics": {f"{NAME}.trainers.base"}}
+    assert _upward(edges) == [f"{NAME}.evaluation.metrics -> {NAME}.trainers.base"]
+
+
+def test_no_sub_package_imports_one_above_it() -> None:
+    assert not _upward(_edges()), _upward(_edges())
+
+
+def test_evaluation_does_not_import_trainers() -> None:
+    reached = {target for module, targets in _edges().items() if _unit(module) == "evaluation" for target in targets}
+    assert not {t for t in reached if _unit(t) == "trainers"}
+
+
+def _cycle(edges: dict[str, set[str]]) -> list[str] | None:
+    """One import cycle (a list of modules, first repeated last), or None (iterative DFS)."""
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+    for root in sorted(edges):
+        if root in state:
+            continue
+        path, stack = [root], [iter(sorted(edges[root]))]
+        state[root] = 1
+        while stack:
+            nxt = next(stack[-1], None)
+            if nxt is None:
+                state[path.pop()] = 2
+                stack.pop()
+            elif state.get(nxt) == 1:
+                return path[path.index(nxt):] + [nxt]
+            elif nxt not in state and nxt in edges:
+                state[nxt] = 1
+                path.append(nxt)
+                stack.append(iter(sorted(edges[nxt])))
+    return None
+
+
+def test_cycle_finder_finds_a_cycle() -> None:
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": set()}) == ["a", "b", "c", "a"]
+    assert _cycle({"a": {"b"}, "b": set()}) is None
+
+
+def test_no_import_cycle() -> None:
+    """Between modules, at runtime (an import under ``TYPE_CHECKING`` is no edge)."""
+    assert _cycle(_edges(runtime_only=True)) is None
+
+
+def test_no_command_line_shares_a_name_with_a_library_module() -> None:
+    commands = {path.stem for path in (PACKAGE / "cli").glob("*.py")} - {"__init__"}
+    shims = {unit for unit in LAYERS[-1]}
+    library = {path.stem for path in SOURCES if _unit(_module_name(path)) not in {"cli", *shims}}
+    assert commands, "the cli/ folder holds the command lines"
+    assert not commands & library, sorted(commands & library)
+
+
+PRIVATE = re.compile(r"^_[^_]")
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_no_module_imports_another_modules_private_names(path: Path) -> None:
+    """``from x import _name`` only within one sub-package (a package's private module,
+    such as ``transforms/_layout.py``, serves its own package); TorchRL's private names
+    only through ``compat.py``."""
+    own = _unit(_module_name(path))
+    taken = [
+        f"{module}.{name}"
+        for module, names, _ in imports(path)
+        for name in names
+        if PRIVATE.match(name)
+        and not (module.startswith(NAME) and _unit(module) == own)
+        and not (module.startswith("torchrl.") and path.name == "compat.py")
+    ]
+    assert not taken, taken
