@@ -33,6 +33,7 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.envs import EnvBase
 
+from torchrl_causal.errors import TorchRLCausalError
 from torchrl_causal.progress import progress as progress_reporter
 
 __all__ = [
@@ -53,7 +54,7 @@ _DATA_DIR = "data"
 _METADATA_FILE = "metadata.json"
 
 
-class DatasetError(ValueError):
+class DatasetError(TorchRLCausalError, ValueError):
     """A demonstration dataset is missing, corrupted or not the one that was expected."""
 
 

@@ -45,6 +45,8 @@ from typing import Any
 import torch
 from omegaconf import DictConfig, OmegaConf
 
+from torchrl_causal.errors import TorchRLCausalError
+
 __all__ = [
     "CONFIG_FILE",
     "WINDOW_FILE",
@@ -86,15 +88,15 @@ RUNTIME_KEYS: tuple[str, ...] = (
 )
 
 
-class CheckpointError(RuntimeError):
+class CheckpointError(TorchRLCausalError, RuntimeError):
     """A checkpoint that cannot be read or does not belong to this run."""
 
 
-class ConfigMismatchError(ValueError):
+class ConfigMismatchError(TorchRLCausalError, ValueError):
     """A run directory holds a run of a different config."""
 
 
-class RunInUseError(RuntimeError):
+class RunInUseError(TorchRLCausalError, RuntimeError):
     """Another process is running this run directory."""
 
 

@@ -35,6 +35,7 @@ from typing import Any, Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
+from torchrl_causal.errors import TorchRLCausalError
 from torchrl_causal.experiment.device import compile_unavailable, resolve_device
 
 __all__ = [
@@ -62,7 +63,7 @@ __all__ = [
 ]
 
 
-class ConfigValueError(ValueError):
+class ConfigValueError(TorchRLCausalError, ValueError):
     """A config value of the right type that is not allowed (out of range, or an env
     without the expert every algorithm needs)."""
 

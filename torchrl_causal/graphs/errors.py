@@ -15,12 +15,15 @@ from __future__ import annotations
 
 from collections.abc import Hashable, Sequence
 
+from torchrl_causal.errors import TorchRLCausalError
+
 __all__ = ["BoundedInfluenceError", "GraphError", "NotImitableError", "WindowConstructionError"]
 
 
-class GraphError(ValueError):
-    """Malformed causal input: a directed cycle, an unknown variable, a negative lag or k,
-    duplicate names, an observed set that is not a subset of the variables, ..."""
+class GraphError(TorchRLCausalError, ValueError):
+    """Base of the graph engine's errors; raised itself on malformed causal input: a directed
+    cycle, an unknown variable, a negative lag or k, duplicate names, an observed set that is
+    not a subset of the variables, ... Its subclasses are the refusals listed above."""
 
 
 class BoundedInfluenceError(GraphError):
@@ -42,7 +45,7 @@ class BoundedInfluenceError(GraphError):
         self.chain = tuple(chain)
 
 
-class NotImitableError(ValueError):
+class NotImitableError(GraphError):
     """No sequential pi-backdoor adjustment exists (Definition 2 cannot be met).
 
     Attributes:
