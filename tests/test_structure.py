@@ -192,3 +192,32 @@ def test_no_module_imports_another_modules_private_names(path: Path) -> None:
         and not (module.startswith("torchrl.") and path.name == "compat.py")
     ]
     assert not taken, taken
+
+
+def _private_reads(source: str) -> list[str]:
+    """The private attributes ``source`` reads (``x._name``) without defining them itself
+    (as a function, class, or by assigning ``something._name``)."""
+    tree = ast.parse(source)
+    own = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            own.add(node.name)
+        elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
+            own.add(node.attr)
+    return [
+        ast.unparse(node)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Attribute) and PRIVATE.match(node.attr) and node.attr not in own
+    ]
+
+
+def test_private_reads_are_found() -> None:
+    source = "class D:\n    def __init__(self):\n        self._pa = []\n\ndef f(g, v):\n    return g._pa, v._rank\n"
+    assert _private_reads(source) == ["v._rank"]
+
+
+@pytest.mark.parametrize("path", sorted((PACKAGE / "graphs").glob("*.py")), ids=lambda p: p.name)
+def test_graph_algorithms_read_diagrams_through_their_public_view(path: Path) -> None:
+    """``criteria`` and ``adjustment`` search a diagram through ``CausalDiagram.indexed``,
+    not its private fields: no module of ``graphs/`` reads a private name it does not define."""
+    assert not _private_reads(path.read_text())

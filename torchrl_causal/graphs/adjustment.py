@@ -37,6 +37,7 @@ from typing import Literal
 from .criteria import BackdoorReport, ExactAdjustment, find_adjustment, sequential_pi_backdoor
 from .diagram import CausalDiagram
 from .errors import BoundedInfluenceError, GraphError, NotImitableError, WindowConstructionError
+from .indexed import UnionFind
 from .template import REWARD, TimeSliceTemplate
 from .window import AdjustmentWindow
 
@@ -137,7 +138,8 @@ def _farthest_extended_parent(g: CausalDiagram, horizon: int) -> tuple[int, tupl
     joined: each node and edge is handled once. Each class keeps its earliest member or
     projected parent.
     """
-    names, latent, pa, sp = g._nodes, g._latent, g._pa, g._sp
+    indexed = g.indexed
+    names, latent, pa, sp = indexed.nodes, indexed.latent, indexed.parents, indexed.siblings
     n = len(names)
     time = [_slice_of(v, horizon) for v in names]
     confounder: dict[tuple[int, int], int] = {}
@@ -145,24 +147,19 @@ def _farthest_extended_parent(g: CausalDiagram, horizon: int) -> tuple[int, tupl
         for b in sp[a]:
             if a < b:
                 confounder[a, b] = n + len(confounder)
-    root = list(range(n + len(confounder)))
+    classes = UnionFind(range(n + len(confounder)))
+    find = classes.find
     earliest: dict[int, tuple[int, int]] = {}  # class root -> (time, node)
     active: set[int] = set()
 
-    def find(v: int) -> int:
-        while root[v] != v:
-            root[v] = root[root[v]]
-            v = root[v]
-        return v
-
     def join(u: int, v: int) -> None:
-        a, b = find(u), find(v)
-        if a != b:
-            root[a] = b
-            earliest[b] = min(earliest.get(a, earliest[b]), earliest[b])
+        gone = classes.union(u, v)
+        if gone is not None:
+            kept = find(v)
+            earliest[kept] = min(earliest.get(gone, earliest[kept]), earliest[kept])
 
     best = (-1, -1, -1)  # (lag, node, extended parent)
-    for v in g._order:
+    for v in indexed.order:
         if v in latent:
             continue
         earliest[v] = (time[v], v)
@@ -202,17 +199,18 @@ def _chain_text(g: CausalDiagram, chain: tuple[Node, ...]) -> str:
 
 def _latent_route(g: CausalDiagram, source: int, target: int) -> list[int] | None:
     """A directed path ``source -> ... -> target`` whose interior is latent, or None."""
+    indexed = g.indexed
     prev = {target: -1}
     queue = [target]
     for u in queue:
-        for p in g._pa[u]:
+        for p in indexed.parents[u]:
             if p == source:
                 path = [source]
                 while u != -1:
                     path.append(u)
                     u = prev[u]
                 return path
-            if p in g._latent and p not in prev:
+            if p in indexed.latent and p not in prev:
                 prev[p] = u
                 queue.append(p)
     return None
@@ -223,9 +221,10 @@ def _extended_parent_chain(g: CausalDiagram, v: int, far: int) -> tuple[Node, ..
     collider-free latent stretches (up to a latent top or across a bidirected edge, then
     down) between observed members of the C-component, then a latent-only directed path
     from ``far`` into the last member."""
+    indexed = g.indexed
     if far == v:
-        return (g._nodes[v],)
-    rank, latent = g._rank, g._latent
+        return (indexed.nodes[v],)
+    rank, latent = indexed.rank, indexed.latent
     up, down, member = 0, 1, 2
     start = (v, member)
     prev: dict[tuple[int, int], tuple[int, int] | None] = {start: None}
@@ -240,13 +239,13 @@ def _extended_parent_chain(g: CausalDiagram, v: int, far: int) -> tuple[Node, ..
                 while walk is not None:
                     nodes.append(walk[0])
                     walk = prev[walk]
-                return tuple(g._nodes[i] for i in nodes[::-1] + route[::-1][1:])
+                return tuple(indexed.nodes[i] for i in nodes[::-1] + route[::-1][1:])
         moves: list[tuple[int, int]] = []
         if phase != down:
-            moves.extend((p, up) for p in g._pa[u] if p in latent)
-            moves.extend((s, down if s in latent else member) for s in g._sp[u])
+            moves.extend((p, up) for p in indexed.parents[u] if p in latent)
+            moves.extend((s, down if s in latent else member) for s in indexed.siblings[u])
         if phase != member:
-            moves.extend((c, down if c in latent else member) for c in g._ch[u])
+            moves.extend((c, down if c in latent else member) for c in indexed.children[u])
         for nxt in moves:
             if nxt not in prev and rank[nxt[0]] < rank[v]:
                 prev[nxt] = state

@@ -1,9 +1,9 @@
 """The sequential pi-backdoor criterion (Definition 2) and Kumor et al.'s FindOX.
 
-Everything here runs on the integer adjacency of a :class:`CausalDiagram` and never
-materialises a latent projection: on unrolled diagrams with a persistent hidden variable
-the projection has a quadratic number of bidirected edges, whereas the searches below
-stay linear per query.
+Everything here runs on the integer adjacency of a :class:`CausalDiagram` (its
+:attr:`~CausalDiagram.indexed` view) and never materialises a latent projection: on
+unrolled diagrams with a persistent hidden variable the projection has a quadratic number
+of bidirected edges, whereas the searches below stay linear per query.
 """
 
 from __future__ import annotations
@@ -13,8 +13,9 @@ from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 
-from .diagram import CausalDiagram, _ancestor_ids, _find_open_path
+from .diagram import CausalDiagram
 from .errors import GraphError, NotImitableError
+from .indexed import UnionFind, find_open_path, reach
 
 Node = Hashable
 
@@ -55,42 +56,39 @@ def _temporal(diagram: CausalDiagram, actions: Node | Iterable[Node], reward: No
     observed non-descendant of its action (the backdoor rule), except descendants of later
     actions, which would close a cycle through the time order of the actions.
     """
-    y = diagram._id(reward)
+    g = diagram.indexed
+    y = g.id(reward)
     single = actions in diagram
-    listed = [diagram._id(actions)] if single else [diagram._id(v) for v in actions]  # type: ignore[union-attr]
-    names = diagram._nodes
+    listed = [g.id(actions)] if single else [g.id(v) for v in actions]  # type: ignore[union-attr]
+    names = g.nodes
     if len(set(listed)) != len(listed):
         twice = next(names[v] for v in listed if listed.count(v) > 1)
         raise GraphError(f"action {twice!r} is listed twice")
     if y in listed:
         raise GraphError(f"the reward {reward!r} cannot also be an action")
-    hidden = [names[i] for i in listed if i in diagram._latent]
+    hidden = [names[i] for i in listed if i in g.latent]
     if hidden:
         raise GraphError(f"actions must be observed nodes, got latent {hidden}")
     if diagram.has_explicit_order:
-        return diagram, sorted(listed, key=diagram._rank.__getitem__), y
+        return diagram, sorted(listed, key=g.rank.__getitem__), y
     if not isinstance(actions, Sequence) or isinstance(actions, str):
-        listed.sort(key=diagram._rank.__getitem__)
+        listed.sort(key=g.rank.__getitem__)
     # level[v] = the latest action t with v a descendant of X_t (0 when none): the nested
     # sets D_t = De(X_t) ∪ D_{t+1} are reached latest action first, each node once.
     level = [0] * len(names)
     for t in range(len(listed), 0, -1):
         x = listed[t - 1]
         if level[x]:
-            later = next(names[a] for a in listed[t:] if x in _ancestor_ids(diagram._ch, [a]))
+            later = next(names[a] for a in listed[t:] if x in reach(g.children, [a]))
             raise GraphError(
                 f"actions must be listed in temporal order, but {later!r} (listed after {names[x]!r}) is "
                 f"an ancestor of it; reorder them, or build the CausalDiagram with order=[...]"
             )
         level[x] = t
-        stack = [x]
-        while stack:
-            for c in diagram._ch[stack.pop()]:
-                if not level[c]:
-                    level[c] = t
-                    stack.append(c)
+        for c in reach(g.children, [x], within=lambda v: not level[v]):
+            level[c] = t
     first = {x: t for t, x in enumerate(listed, 1)}
-    rank = diagram._rank
+    rank = g.rank
     order = sorted(range(len(names)), key=lambda v: (level[v], first.get(v) != level[v], rank[v]))
     ordered = diagram.with_order([names[v] for v in order])
     return ordered, listed, y
@@ -111,12 +109,13 @@ class _ManipulatedGraph:
     """
 
     def __init__(self, diagram: CausalDiagram, sets: Mapping[int, set[int]], reward: int) -> None:
-        self.rank = diagram._rank
-        self.pa = [list(p) for p in diagram._pa]
-        self.ch = [list(c) for c in diagram._ch]
-        self.sp = [list(s) for s in diagram._sp]
-        policy_parents = [sets[v] if v in sets else p for v, p in enumerate(diagram._pa)]
-        self.causes_reward = _ancestor_ids(policy_parents, [reward])
+        g = diagram.indexed
+        self.rank = g.rank
+        self.pa = [list(p) for p in g.parents]
+        self.ch = [list(c) for c in g.children]
+        self.sp = [list(s) for s in g.siblings]
+        policy_parents = [sets[v] if v in sets else p for v, p in enumerate(g.parents)]
+        self.causes_reward = {reward} | reach(policy_parents, [reward])
 
     def make_future(self, action: int, adjustment: Iterable[int]) -> None:
         pa, ch, sp = self.pa, self.ch, self.sp
@@ -162,14 +161,15 @@ class _ManipulatedGraph:
         """Definition 2 for ``x`` (every later action already made future)."""
         if x not in self.causes_reward:
             return "not_ancestor", None
-        path = _find_open_path(self.pa, self.ch, self.sp, [x], z.__contains__, self._ancestor_test(x, z), reward.__eq__, cut=x)
+        path = find_open_path(self.pa, self.ch, self.sp, [x], z.__contains__, self._ancestor_test(x, z), reward.__eq__, cut=x)
         return ("separated", None) if path is None else ("open_path", path)
 
 
 def _adjustment_ids(
     diagram: CausalDiagram, action_ids: list[int], adjustment: Mapping[Node, Iterable[Node]], given_order: bool
 ) -> dict[int, set[int]]:
-    names, rank, index = diagram._nodes, diagram._rank, diagram._index
+    g = diagram.indexed
+    names, rank, index = g.nodes, g.rank, g.index
     unknown = set(adjustment) - {names[x] for x in action_ids}
     if unknown:
         raise GraphError(f"adjustment sets given for nodes that are not actions: {sorted(map(repr, unknown))}")
@@ -186,12 +186,12 @@ def _adjustment_ids(
         try:
             z = set(map(index.__getitem__, given))
         except (KeyError, TypeError):
-            z = {diagram._id(v) for v in given}  # names the unknown node
+            z = {g.id(v) for v in given}  # names the unknown node
         if not z:
             sets[x] = z
             continue
-        if not z.isdisjoint(diagram._latent):
-            raise GraphError(f"the adjustment set of {names[x]!r} holds latent nodes {[names[v] for v in z & diagram._latent]}")
+        if not z.isdisjoint(g.latent):
+            raise GraphError(f"the adjustment set of {names[x]!r} holds latent nodes {[names[v] for v in z & g.latent]}")
         if max(map(rank.__getitem__, z)) >= rank[x]:
             late = [names[v] for v in sorted((v for v in z if rank[v] >= rank[x]), key=rank.__getitem__)]
             if given_order:
@@ -247,10 +247,10 @@ def sequential_pi_backdoor(
     """
     g, action_ids, y = _temporal(diagram, actions, reward)
     sets = _adjustment_ids(g, action_ids, adjustment, diagram.has_explicit_order)
-    checked = set(action_ids) if check is None else {g._id(v) for v in check}
+    names = g.indexed.nodes
+    checked = set(action_ids) if check is None else {g.indexed.id(v) for v in check}
     if not checked <= set(action_ids):
-        raise GraphError(f"check names nodes that are not actions: {sorted(repr(g._nodes[v]) for v in checked - set(action_ids))}")
-    names = g._nodes
+        raise GraphError(f"check names nodes that are not actions: {sorted(repr(names[v]) for v in checked - set(action_ids))}")
     reasons: dict[Node, str] = {}
     witnesses: dict[Node, tuple[Node, ...]] = {}
     graph = _ManipulatedGraph(g, sets, y)
@@ -277,77 +277,43 @@ class _AncestralView:
     """
 
     def __init__(self, diagram: CausalDiagram, reward: int) -> None:
-        self.g = diagram
+        self.g = diagram.indexed
         self.reward = reward
-        self.nodes = _ancestor_ids(diagram._pa, [reward])
-        self.latent = diagram._latent
-        root = {v: v for v in self.nodes}
-
-        def find(v: int) -> int:
-            while root[v] != v:
-                root[v] = root[root[v]]
-                v = root[v]
-            return v
-
+        g = self.g
+        self.nodes = {reward} | reach(g.parents, [reward])
+        self.latent = g.latent
+        components = UnionFind(self.nodes)
         for v in self.nodes:
-            links = diagram._ch[v] if v in self.latent else ()
-            for u in (*links, *diagram._sp[v]):
+            links = g.children[v] if v in self.latent else ()
+            for u in (*links, *g.siblings[v]):
                 if u in self.nodes:
-                    a, b = find(u), find(v)
-                    if a != b:
-                        root[a] = b
+                    components.union(u, v)
         self.component: dict[int, int] = {}
         self.members: dict[int, list[int]] = {}
         for v in self.nodes:
             if v not in self.latent:
-                r = find(v)
+                r = components.find(v)
                 self.component[v] = r
                 self.members.setdefault(r, []).append(v)
         self._ch_plus: dict[int, list[int]] = {}
         self._ancestry: dict[int, tuple[set[int], set[int]]] = {}
 
     def ch_plus(self, v: int, stop: Mapping[int, object] | None = None) -> list[int] | None:
-        """Children in the projection; with ``stop``, None as soon as one is not a key of it."""
-        if v in self._ch_plus:
-            found = self._ch_plus[v]
-            return found if stop is None or all(c in stop for c in found) else None
-        ch, latent, nodes = self.g._ch, self.latent, self.nodes
-        found_set: set[int] = set()
-        seen: set[int] = set()
-        stack = [v]
-        while stack:
-            for c in ch[stack.pop()]:
-                if c not in nodes:
-                    continue
-                if c in latent:
-                    if c not in seen:
-                        seen.add(c)
-                        stack.append(c)
-                elif stop is not None and c not in stop:
-                    return None
-                else:
-                    found_set.add(c)
-        found = sorted(found_set)
-        self._ch_plus[v] = found
-        return found
+        """Children in the projection; with ``stop``, None when one is not a key of it."""
+        if v not in self._ch_plus:
+            latent = self.latent
+            reached = reach(self.g.children, [v], through=latent.__contains__, within=self.nodes.__contains__)
+            self._ch_plus[v] = sorted(c for c in reached if c not in latent)
+        found = self._ch_plus[v]
+        return found if stop is None or all(c in stop for c in found) else None
 
     def latent_ancestry(self, comp: int) -> tuple[set[int], set[int]]:
         """The observed parents, in the projection, of the members of one C-component, and
         the latent nodes on the latent-only directed paths into them."""
         if comp not in self._ancestry:
-            pa, latent = self.g._pa, self.latent
-            parents: set[int] = set()
-            between: set[int] = set()
-            stack = list(self.members[comp])
-            while stack:
-                for p in pa[stack.pop()]:
-                    if p in latent:
-                        if p not in between:
-                            between.add(p)
-                            stack.append(p)
-                    else:
-                        parents.add(p)
-            self._ancestry[comp] = parents, between
+            latent = self.latent
+            reached = reach(self.g.parents, self.members[comp], through=latent.__contains__)
+            self._ancestry[comp] = reached - latent, reached & latent
         return self._ancestry[comp]
 
     def projected_parents(self, comp: int) -> set[int]:
@@ -377,8 +343,8 @@ class _ComponentGraph:
         parents, between = view.latent_ancestry(comp)
         self.held = parents.difference(self.members)
         self.nodes = set(self.members) | parents | between
-        self.order = sorted(self.nodes, key=g._rank.__getitem__, reverse=True)
-        self.children = {v: [c for c in g._ch[v] if c in self.nodes and c not in self.held] for v in self.nodes}
+        self.order = sorted(self.nodes, key=g.rank.__getitem__, reverse=True)
+        self.children = {v: [c for c in g.children[v] if c in self.nodes and c not in self.held] for v in self.nodes}
         self.open_members = {m for m in self.members if m not in keys}
         self.earliest: dict[int, tuple[tuple[int, int], ...]] = {}
         self.latest: list[tuple[int, int]] = []  # the two latest open members, (rank, node)
@@ -394,7 +360,7 @@ class _ComponentGraph:
         if not self.stale:
             return
         self.stale = False
-        rank, children, open_members = self.g._rank, self.children, self.open_members
+        rank, children, open_members = self.g.rank, self.children, self.open_members
         earliest: dict[int, tuple[tuple[int, int], ...]] = {}
         for v in self.order:
             best = {(rank[v], v)} if v in open_members else set()
@@ -416,7 +382,7 @@ class _ComponentGraph:
         """
         self.refresh()
         g, held, actions = self.g, self.held, self.actions
-        open_members, rank, earliest = self.open_members, g._rank, self.earliest
+        open_members, rank, earliest = self.open_members, g.rank, self.earliest
         before_rank = rank[action]
         if not any(m != source and r >= before_rank for r, m in self.latest):
             return True
@@ -433,8 +399,8 @@ class _ComponentGraph:
         def fixed(v: int) -> bool:
             return v in held or v in actions and v in keys and rank[v] > before_rank
 
-        path = _find_open_path(
-            g._pa, g._ch, g._sp, [source], conditioned, collider_open, target, self.nodes.__contains__,
+        path = find_open_path(
+            g.parents, g.children, g.siblings, [source], conditioned, collider_open, target, self.nodes.__contains__,
             cut=action, fixed=fixed,
         )
         return path is None
@@ -443,7 +409,7 @@ class _ComponentGraph:
 def _find_ox_map(g: CausalDiagram, action_ids: list[int], y: int) -> tuple[dict[int, int], _AncestralView]:
     actions = set(action_ids)
     view = _AncestralView(g, y)
-    rank = g._rank
+    rank = g.indexed.rank
     candidates = sorted((v for v in view.component if v != y), key=rank.__getitem__, reverse=True)
     graphs: dict[int, _ComponentGraph] = {}
 
@@ -505,7 +471,7 @@ def find_ox(diagram: CausalDiagram, actions: Node | Iterable[Node], reward: Node
     """
     g, action_ids, y = _temporal(diagram, actions, reward)
     ox, _ = _find_ox_map(g, action_ids, y)
-    return frozenset(g._nodes[v] for v in ox)
+    return frozenset(g.indexed.nodes[v] for v in ox)
 
 
 def _certificate(g: CausalDiagram, action_ids: list[int], x: int, y: int) -> tuple[list[int], set[int]] | None:
@@ -519,24 +485,18 @@ def _certificate(g: CausalDiagram, action_ids: list[int], x: int, y: int) -> tup
     nodes, ``An`` of the pair intersected with ``R`` does), hence no family passes at
     ``x``. Returns that open path and ``Z*``.
     """
-    rank, latent = g._rank, g._latent
+    indexed = g.indexed
+    rank, latent = indexed.rank, indexed.latent
     later = {a for a in action_ids if rank[a] > rank[x]}
-    reached = {x}
-    stack = [x]
-    while stack:
-        for c in g._ch[stack.pop()]:
-            if c not in reached and c not in later:
-                reached.add(c)
-                stack.append(c)
-    if y not in reached:
+    if y not in reach(indexed.children, [x], within=lambda c: c not in later):
         return None
-    favourable_parents = [() if v in later else p for v, p in enumerate(g._pa)]
+    favourable_parents = [() if v in later else p for v, p in enumerate(indexed.parents)]
     conditioned = {
-        v for v in _ancestor_ids(favourable_parents, [x, y]) if v not in latent and rank[v] < rank[x]
+        v for v in {x, y} | reach(favourable_parents, [x, y]) if v not in latent and rank[v] < rank[x]
     }
-    path = _find_open_path(
-        g._pa, g._ch, g._sp, [x], conditioned.__contains__, _ancestor_ids(favourable_parents, conditioned).__contains__,
-        y.__eq__, cut=x, fixed=later.__contains__,
+    path = find_open_path(
+        indexed.parents, indexed.children, indexed.siblings, [x], conditioned.__contains__,
+        (conditioned | reach(favourable_parents, conditioned)).__contains__, y.__eq__, cut=x, fixed=later.__contains__,
     )
     return None if path is None else (path, conditioned)
 
@@ -567,13 +527,13 @@ class ExactAdjustment:
     @cached_property
     def conditioning_order(self) -> tuple[Node, ...]:
         """``MB ∪ BA`` in temporal order: ``Z_t`` of a boundary action is its prefix before ``X_t``."""
-        rank = self.diagram._rank
-        ids = sorted((self.diagram._id(v) for v in self.markov_boundary | self.boundary_actions), key=rank.__getitem__)
-        return tuple(self.diagram._nodes[i] for i in ids)
+        g = self.diagram.indexed
+        return g.in_order(g.id(v) for v in self.markov_boundary | self.boundary_actions)
 
     @cached_property
     def _conditioning_ranks(self) -> list[int]:
-        return [self.diagram._rank[self.diagram._id(v)] for v in self.conditioning_order]
+        g = self.diagram.indexed
+        return [g.rank[g.id(v)] for v in self.conditioning_order]
 
     def set_size(self, action: Node) -> int:
         """``|Z_t|`` of ``action``: the length of its prefix of :attr:`conditioning_order`."""
@@ -581,7 +541,8 @@ class ExactAdjustment:
             if action not in self.actions:
                 raise GraphError(f"{action!r} is not an action of this diagram")
             return 0
-        return bisect_left(self._conditioning_ranks, self.diagram._rank[self.diagram._id(action)])
+        g = self.diagram.indexed
+        return bisect_left(self._conditioning_ranks, g.rank[g.id(action)])
 
     def adjustment_set(self, action: Node) -> frozenset[Node]:
         return frozenset(self.conditioning_order[: self.set_size(action)])
@@ -593,7 +554,7 @@ class ExactAdjustment:
 
 
 def _not_imitable(g: CausalDiagram, action_ids: list[int], failing: list[int], y: int) -> NotImitableError:
-    names = g._nodes
+    names = g.indexed.nodes
     shown = ", ".join(repr(names[x]) for x in failing[:6]) + (f" and {len(failing) - 6} more" if len(failing) > 6 else "")
     tried = failing[-8:]  # the latest ones have the fewest later actions to route around
     for x in reversed(tried):
@@ -658,7 +619,7 @@ def find_adjustment(diagram: CausalDiagram, actions: Node | Iterable[Node], rewa
     # excludes anyway; it matters through Ch(O^X), which skips the children of X'.
     boundary -= ox
     boundary_actions = {x for x in acting if not set(view.ch_plus(x) or ()) <= ox}
-    names = g._nodes
+    names = g.indexed.nodes
     return ExactAdjustment(
         diagram=g,
         actions=tuple(names[x] for x in action_ids),

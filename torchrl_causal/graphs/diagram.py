@@ -2,18 +2,21 @@
 
 Nodes are arbitrary hashables. Internally every node is an int (its insertion index) and
 adjacency is stored as tuples of ints, because the unrolled diagrams of long episodes
-have tens of thousands of nodes and every search below must stay linear in their size.
+have tens of thousands of nodes and every search below must stay linear in their size;
+:attr:`CausalDiagram.indexed` hands that representation to the graph algorithms.
 """
 
 from __future__ import annotations
 
 import heapq
-from collections import deque
 from collections.abc import Callable, Hashable, Iterable, Sequence
 from dataclasses import dataclass
+from functools import cached_property
+from types import MappingProxyType
 from typing import Any
 
 from .errors import GraphError
+from .indexed import IndexedDiagram, find_open_path, reach
 
 Node = Hashable
 
@@ -27,101 +30,6 @@ class Confounder:
 
     a: Node
     b: Node
-
-
-def _ancestor_ids(parents: Sequence[Sequence[int]], seeds: Iterable[int]) -> set[int]:
-    """The seeds and every node with a directed path into one of them."""
-    found = set(seeds)
-    stack = list(found)
-    while stack:
-        for p in parents[stack.pop()]:
-            if p not in found:
-                found.add(p)
-                stack.append(p)
-    return found
-
-
-def _simple_path(walk: list[int]) -> list[int]:
-    """Shortcut an open walk into an open path.
-
-    Cutting the loop between the first and the last visit of a repeated node keeps the
-    walk open: a node entered through a tail, or lying in An(Z), is fine at any junction;
-    a conditioned node was entered and left through arrowheads (so stays a collider in
-    An(Z)); and a node outside An(Z) entered through an arrowhead is left through a tail,
-    after which the walk can only run down a directed path (any later collider would put
-    the node in An(Z)), so it is never revisited.
-    """
-    while True:
-        first: dict[int, int] = {}
-        for i, v in enumerate(walk):
-            if v in first:
-                last = len(walk) - 1 - walk[::-1].index(v)
-                walk = walk[: first[v]] + walk[last:]
-                break
-            first[v] = i
-        else:
-            return walk
-
-
-def _find_open_path(
-    parents: Sequence[Sequence[int]],
-    children: Sequence[Sequence[int]],
-    spouses: Sequence[Sequence[int]],
-    sources: Iterable[int],
-    blocked: Callable[[int], bool],
-    collider_open: Callable[[int], bool],
-    is_target: Callable[[int], bool],
-    inside: Callable[[int], bool] | None = None,
-    cut: int = -1,
-    fixed: Callable[[int], bool] | None = None,
-) -> list[int] | None:
-    """Breadth-first Bayes-ball on a mixed graph; the shortest open path to a target, or None.
-
-    A state is ``2 * node + head``: ``head`` is 1 when the walk entered ``node`` through an
-    arrowhead (from a parent or a spouse) and 0 when it entered through a tail (from a
-    child). Each state is expanded at most once, so the search is O(V + E). ``blocked`` is
-    the conditioning set, ``collider_open`` its ancestral closure (colliders pass only
-    there), ``inside`` restricts the search to an induced subgraph. Edges can be deleted
-    without copying the graph: ``cut`` is a node whose outgoing edges are absent, ``fixed``
-    marks the nodes whose incoming edges (directed and bidirected) are absent.
-    """
-    prev: dict[int, int] = {}
-    queue: deque[int] = deque()
-    for s in sources:
-        if 2 * s not in prev:
-            prev[2 * s] = -1
-            queue.append(2 * s)
-    while queue:
-        state = queue.popleft()
-        v = state >> 1
-        origin = prev[state] == -1
-        if not origin and is_target(v):
-            walk = []
-            while state != -1:
-                walk.append(state >> 1)
-                state = prev[state]
-            return _simple_path(walk[::-1])
-        down = () if v == cut else children[v]
-        moves: list[int] = []
-        if state & 1:
-            if collider_open(v):
-                moves.extend(2 * p for p in parents[v] if p != cut)
-                moves.extend(2 * s + 1 for s in spouses[v])
-            if not blocked(v):
-                moves.extend(2 * c + 1 for c in down)
-        elif origin or not blocked(v):
-            moves.extend(2 * c + 1 for c in down)
-            if fixed is None or not fixed(v):
-                moves.extend(2 * p for p in parents[v] if p != cut)
-                moves.extend(2 * s + 1 for s in spouses[v])
-        for nxt in moves:
-            if nxt in prev or (inside is not None and not inside(nxt >> 1)):
-                continue
-            if nxt & 1 and fixed is not None and fixed(nxt >> 1):
-                continue
-            prev[nxt] = state
-            queue.append(nxt)
-    return None
 
 
 class CausalDiagram:
@@ -260,6 +168,7 @@ class CausalDiagram:
         return diagram
 
     def _set_order(self, order: list[int], explicit: bool) -> None:
+        self.__dict__.pop("indexed", None)  # a copy made by with_order gets its own view
         self._order = order
         self._rank = [0] * len(order)
         for r, i in enumerate(order):
@@ -348,6 +257,21 @@ class CausalDiagram:
         return tuple(self._nodes[i] for i in sorted(ids, key=self._rank.__getitem__))
 
     # ------------------------------------------------------------------ basic structure
+    @cached_property
+    def indexed(self) -> IndexedDiagram:
+        """The diagram as ints, read-only (see :class:`~torchrl_causal.graphs.indexed.IndexedDiagram`):
+        what the criteria and the adjustment search run on."""
+        return IndexedDiagram(
+            nodes=tuple(self._nodes),
+            index=MappingProxyType(self._index),
+            parents=tuple(self._pa),
+            children=tuple(self._ch),
+            siblings=tuple(self._sp),
+            latent=self._latent,
+            order=tuple(self._order),
+            rank=tuple(self._rank),
+        )
+
     @property
     def nodes(self) -> tuple[Node, ...]:
         """All nodes in topological order."""
@@ -400,11 +324,13 @@ class CausalDiagram:
 
     def ancestors(self, vs: Node | Iterable[Node]) -> frozenset[Node]:
         """``vs`` and every node with a directed path into ``vs``."""
-        return self._names(_ancestor_ids(self._pa, self._ids(vs)))
+        ids = self._ids(vs)
+        return self._names(ids | reach(self._pa, ids))
 
     def descendants(self, vs: Node | Iterable[Node]) -> frozenset[Node]:
         """``vs`` and every node reachable from ``vs`` by a directed path."""
-        return self._names(_ancestor_ids(self._ch, self._ids(vs)))
+        ids = self._ids(vs)
+        return self._names(ids | reach(self._ch, ids))
 
     def topological_order(self) -> tuple[Node, ...]:
         return self.nodes
@@ -434,14 +360,7 @@ class CausalDiagram:
 
     # ------------------------------------------------------------------ confounding structure
     def _c_component_ids(self, start: int, allowed: Callable[[int], bool] | None = None) -> set[int]:
-        comp = {start}
-        stack = [start]
-        while stack:
-            for s in self._sp[stack.pop()]:
-                if s not in comp and (allowed is None or allowed(s)):
-                    comp.add(s)
-                    stack.append(s)
-        return comp
+        return {start} | reach(self._sp, [start], within=allowed)
 
     def c_component(self, v: Node) -> frozenset[Node]:
         """The confounded component of ``v``: nodes joined to it by bidirected paths (Def. 3)."""
@@ -467,18 +386,7 @@ class CausalDiagram:
 
     def _ch_plus_ids(self, i: int) -> set[int]:
         latent = self._latent
-        found: set[int] = set()
-        seen_latent: set[int] = set()
-        stack = [i]
-        while stack:
-            for c in self._ch[stack.pop()]:
-                if c in latent:
-                    if c not in seen_latent:
-                        seen_latent.add(c)
-                        stack.append(c)
-                else:
-                    found.add(c)
-        return found
+        return {c for c in reach(self._ch, [i], through=latent.__contains__) if c not in latent}
 
     def ch_plus(self, v: Node) -> frozenset[Node]:
         """Effective children: observed nodes reached by directed paths whose interior is latent
@@ -589,8 +497,8 @@ class CausalDiagram:
         common = x & y
         if common:
             return (self._nodes[min(common)],)
-        path = _find_open_path(
-            self._pa, self._ch, self._sp, x, z.__contains__, _ancestor_ids(self._pa, z).__contains__, y.__contains__
+        path = find_open_path(
+            self._pa, self._ch, self._sp, x, z.__contains__, (z | reach(self._pa, z)).__contains__, y.__contains__
         )
         return None if path is None else tuple(self._nodes[i] for i in path)
 
