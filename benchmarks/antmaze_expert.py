@@ -47,7 +47,8 @@ def main() -> None:
     torch.set_num_threads(1)
 
     lines = [
-        "| maze | radius (m) | regime | episodes | success % (± SE) | mean successful length (± std) | raw E[Y] (± std) | paper: success / length / E[Y] |",
+        "| maze | radius (m) | regime | episodes | success % (± SE) | mean successful length (± std) | raw E[Y] (± std) "
+        "| paper: success / length / E[Y] |",
         "| --- | ---: | --- | ---: | ---: | ---: | ---: | --- |",
     ]
     start = time.time()

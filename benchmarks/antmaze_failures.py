@@ -53,7 +53,8 @@ def main() -> None:
     parser.add_argument("--flip-height", type=float, default=0.35)
     args = parser.parse_args()
     torch.set_num_threads(1)
-    print(f"| run | {args.regime} episodes | success % | flipped % | upright timeout % | upright: median distance to goal (m) | upright within 2 m |")
+    print(f"| run | {args.regime} episodes | success % | flipped % | upright timeout % "
+          "| upright: median distance to goal (m) | upright within 2 m |")
     print("|---|---:|---:|---:|---:|---:|---:|")
     for run in args.runs:
         c = classify(run, args.regime, args.episodes, args.seed, args.flip_height)

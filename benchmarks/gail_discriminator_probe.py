@@ -94,7 +94,8 @@ def main() -> None:
     report("as the run left it", baseline, baseline)
     loss = trainer.losses.discriminator
     lr = args.lr if args.lr is not None else float(cfg.algo.discriminator_optimizer.lr)
-    print(f"training on the first round's rows, lr {lr:g} (the run's was {trainer.discriminator_optimizer.param_groups[0]['lr']:g} at the checkpoint)")
+    run_lr = trainer.discriminator_optimizer.param_groups[0]["lr"]
+    print(f"training on the first round's rows, lr {lr:g} (the run's was {run_lr:g} at the checkpoint)")
     optimizer = torch.optim.Adam(loss.parameters(), lr=lr)
     batch_size = int(cfg.algo.discriminator_batch_size)
     for step in range(1, max(args.steps) + 1):

@@ -116,8 +116,9 @@ class DeviceCheck(Callback):
 class PolicyOnDevice(TensorDictModuleBase):
     """Runs a policy that lives on ``device`` in an env that steps on the CPU.
 
-    The policy's inputs are moved to ``device`` and its outputs back to the CPU. Collectors do this themselves (``policy_device``); this is for loops that
-    call the policy directly, such as the evaluation loop.
+    The policy's inputs are moved to ``device`` and its outputs back to the CPU. Collectors do
+    this themselves (``policy_device``); this is for loops that call the policy directly, such
+    as the evaluation loop.
 
     Examples:
         >>> from tensordict import TensorDict
