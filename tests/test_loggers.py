@@ -4,7 +4,6 @@ directory exists, naming the extra."""
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
