@@ -4,7 +4,9 @@ exactly, overrides reach the run, experiments sweep what the paper sweeps."""
 
 from __future__ import annotations
 
+
 import itertools
+import re
 import subprocess
 import sys
 from collections.abc import Iterator, Mapping
@@ -145,7 +147,8 @@ def test_a_value_of_the_wrong_type_fails_at_composition(override: str, exception
      "algo.num_envs=0", "algo.batch_size=1", "algo.expert_ratio=1.0", "algo.actor.dropout=1.0",
      "env.confounding_strength=1.5", "env.confounding_strength=-0.1", "env.horizon=0", "window.k=-1", "threads=0",
      "algo.loss.target_entropy=high", "log_every=0", "collector_workers=0", "collector_workers=3",
-     "algo.random_steps=5001", "device=cuda:999", "device=gpu"],
+     "algo.random_steps=5001", "device=cuda:999", "device=gpu", "window.k=1000", "algo.total_steps=5000",
+     "max_memory_gb=0"],
 )
 def test_an_out_of_range_value_is_refused_by_name(override: str) -> None:
     key = override.split("=")[0]
@@ -155,6 +158,34 @@ def test_an_out_of_range_value_is_refused_by_name(override: str) -> None:
         return
     with pytest.raises(ConfigValueError, match=key.replace(".", r"\.")):
         validate_config(compose_config([override]))
+
+
+@pytest.mark.parametrize("override, named, hint", [
+    ("+windw.k=2", "windw.k", "window.k"),  # Hydra's own suggestion for the typo windw.k=2
+    ("+window.lags=3", "window.lags", None),
+    ("+algo.actor.hiden=3", "algo.actor.hiden", "algo.actor.hidden"),
+    ("+eval.episode=3", "eval.episode", "eval.episodes"),
+])
+def test_a_key_added_with_plus_is_refused_like_an_unknown_key(override: str, named: str, hint: str | None) -> None:
+    cfg = compose_config(["algo=sqil", override])  # `+` gets past composition ...
+    with pytest.raises(ConfigValueError, match=rf"config key {re.escape(named)} is unknown") as error:
+        validate_config(cfg)  # ... and is refused before anything runs
+    assert hint is None or f"did you mean {hint}?" in str(error.value)
+
+
+def test_free_form_target_arguments_take_added_keys() -> None:
+    # env.make's keys are the env class's keyword arguments: no schema lists them
+    validate_config(compose_config(["env=rovermaze_u", "+env.make.extra=1"]))
+
+
+def test_sizes_must_agree_and_a_budget_must_outlast_the_warm_up() -> None:
+    validate_config(compose_config(["env=rovermaze_u", "env.horizon=40", "window.k=39"]))
+    with pytest.raises(ConfigValueError, match=r"window\.k=40 must be < env\.horizon=40"):
+        validate_config(compose_config(["env=rovermaze_u", "env.horizon=40", "window.k=40"]))
+    validate_config(compose_config(["env=route_choice"]))  # one stage, k = 0
+    with pytest.raises(ConfigValueError, match=r"algo\.total_steps=100 must be > algo\.random_steps=512"):
+        validate_config(compose_config(["algo=sqil", "algo.total_steps=100", "algo.random_steps=512"]))
+    validate_config(compose_config(["algo=sqil", "algo.total_steps=520", "algo.random_steps=512"]))
 
 
 def test_enums_of_the_losses_name_their_options() -> None:

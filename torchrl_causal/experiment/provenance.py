@@ -15,19 +15,30 @@ resume under other ones says so in the run's log, and the run's record (what
 from __future__ import annotations
 
 import hashlib
+import os
+import platform
 import sys
+from functools import cache
+from importlib import metadata
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import torch
 
-__all__ = ["PACKAGE_DIR", "RUNTIME_FIELDS", "attempt_identity", "identity_changes", "source_fingerprint"]
+__all__ = ["PACKAGE_DIR", "PACKAGES", "RUNTIME_FIELDS", "attempt_identity", "cpu_model", "identity_changes",
+           "machine_identity", "package_versions", "source_fingerprint"]
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 
-#: The fields of an attempt that change a run's numbers when they change.
-RUNTIME_FIELDS: tuple[str, ...] = ("source", "torch", "demonstrations", "compile", "device")
+#: The fields of an attempt that change a run's numbers when they change (another CPU or
+#: thread count changes floating-point summation order; another numpy, mujoco or TorchRL
+#: changes the envs' and collectors' arithmetic).
+RUNTIME_FIELDS: tuple[str, ...] = ("source", "torch", "packages", "cpu", "threads", "demonstrations", "compile",
+                                   "device")
+
+#: The distributions whose versions a run records (their import names differ for two).
+PACKAGES: tuple[str, ...] = ("torch", "torchrl", "tensordict", "numpy", "mujoco", "gymnasium", "hydra-core")
 
 
 def source_fingerprint(package_dir: Path = PACKAGE_DIR) -> str:
@@ -54,29 +65,74 @@ def source_fingerprint(package_dir: Path = PACKAGE_DIR) -> str:
     return digest.hexdigest()[:12]
 
 
+def package_versions(names: tuple[str, ...] = PACKAGES) -> dict[str, str | None]:
+    """The installed version of each distribution in ``names`` (``None``: not installed).
+
+    Examples:
+        >>> versions = package_versions()
+        >>> list(versions) == list(PACKAGES), versions["torch"] == torch.__version__
+        (True, True)
+    """
+    versions: dict[str, str | None] = {}
+    for name in names:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    return versions
+
+
+@cache
+def cpu_model() -> str:
+    """The processor's model name (``/proc/cpuinfo`` on Linux, else :func:`platform.processor`),
+    or the machine type when neither names it."""
+    try:
+        with open("/proc/cpuinfo") as handle:
+            for line in handle:
+                if line.startswith(("model name", "Hardware", "Processor")) and ":" in line:
+                    return " ".join(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
+
+
+def machine_identity() -> dict[str, object]:
+    """The package versions (:data:`PACKAGES`), CPU model, torch's thread count and the
+    machine's core count of this process.
+
+    Examples:
+        >>> sorted(machine_identity())
+        ['cores', 'cpu', 'packages', 'threads']
+    """
+    return {"packages": package_versions(), "cpu": cpu_model(), "threads": torch.get_num_threads(),
+            "cores": os.cpu_count()}
+
+
 def attempt_identity(demonstrations: str | None, compile: bool, device: str | torch.device) -> dict[str, Any]:
     """What an attempt trains under: the library's :func:`source_fingerprint`, torch's and
     Python's versions, the demonstration set's checksum (``demonstrations``, its first 12
-    hex digits are kept; ``None`` for none), and whether it compiles, on which device.
+    hex digits are kept; ``None`` for none), whether it compiles, on which device, and the
+    :func:`machine_identity` (package versions, CPU, threads).
 
     Examples:
         >>> identity = attempt_identity("b34e70289b3df979", compile=False, device="cpu")
         >>> sorted(identity), identity["demonstrations"]
-        (['compile', 'demonstrations', 'device', 'python', 'source', 'torch'], 'b34e70289b3d')
+        (['compile', 'cores', 'cpu', 'demonstrations', 'device', 'packages', 'python', 'source', 'threads', 'torch'], 'b34e70289b3d')
     """
     return {"source": source_fingerprint(), "torch": torch.__version__, "python": sys.version.split()[0],
             "demonstrations": None if demonstrations is None else demonstrations[:12], "compile": bool(compile),
-            "device": str(device)}
+            "device": str(device), **machine_identity()}
 
 
 def identity_changes(previous: Mapping[str, Any], current: Mapping[str, Any]) -> dict[str, tuple[Any, Any]]:
     """The :data:`RUNTIME_FIELDS` whose values differ between two attempts, as
-    ``{field: (previous, current)}``.
+    ``{field: (previous, current)}``. A field the previous attempt did not record (it
+    predates the field: ``packages``, ``cpu``, ``threads``) is unknown, not changed.
 
     Examples:
         >>> identity_changes({"source": "a", "torch": "2.13.0", "compile": False, "device": "cpu"},
-        ...                  {"source": "b", "torch": "2.13.0", "compile": True, "device": "cpu"})
+        ...                  {"source": "b", "torch": "2.13.0", "compile": True, "device": "cpu", "threads": 2})
         {'source': ('a', 'b'), 'compile': (False, True)}
     """
     return {key: (previous.get(key), current.get(key)) for key in RUNTIME_FIELDS
-            if previous.get(key) != current.get(key)}
+            if key in previous and previous.get(key) != current.get(key)}

@@ -83,7 +83,7 @@ TRAIN_CURVE = "eval/train_return"  # scalar logged at every periodic train-regim
 #: Config keys that change how a run executes or where it writes, never its numbers: they
 #: may differ between the attempts of one run (a resume on another machine, more threads).
 RUNTIME_KEYS: tuple[str, ...] = (
-    "resume", "progress_bar", "threads", "device", "compile", "log_every", "checkpoint_every_s", "logger",
+    "resume", "progress_bar", "threads", "device", "compile", "log_every", "checkpoint_every_s", "max_memory_gb", "logger",
     "run_root", "run_name", "run_dir", "demos.path",
 )
 

@@ -27,8 +27,10 @@ Examples:
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import enum
 import math
+import typing
 from dataclasses import dataclass, field
 from typing import Any, Optional
 
@@ -423,6 +425,7 @@ class Config:
     resume: bool = MISSING
     progress_bar: bool = MISSING
     checkpoint_every_s: float = _ranged(ge=0.0)  # 0: after every training iteration
+    max_memory_gb: Optional[float] = _ranged(gt=0.0, default=None)  # None: the memory available when the run starts
     run_root: str = MISSING
     run_name: str = MISSING
     run_dir: str = MISSING
@@ -469,6 +472,58 @@ def _check_ranges(node: DictConfig, where: str) -> None:
                 raise ConfigValueError(f"config value {key}={value!r} is out of range: it must be {_BOUND_TEXT[bound]} {limit:g}")
 
 
+def _leaves(node: Any, where: str) -> list[str]:
+    if isinstance(node, DictConfig) and not node._is_none() and not node._is_missing() and len(node):
+        return [leaf for key in node.keys() for leaf in _leaves(node._get_node(key), f"{where}.{key}")]
+    return [where]
+
+
+def _unknown_keys(node: DictConfig, where: str) -> list[str]:
+    """Keys of ``node`` (and below) that its schema does not declare, down to their leaves.
+    A ``+key=value`` override adds a key even to a typed node, so composition alone does
+    not refuse it."""
+    schema = OmegaConf.get_type(node)
+    if schema is None or not dataclasses.is_dataclass(schema):
+        return []  # a free-form node (``env.make``, ``env.expert``): its target's arguments
+    declared = {spec.name for spec in dataclasses.fields(schema)}
+    unknown = [leaf for key in node.keys() if key not in declared for leaf in _leaves(node._get_node(key), f"{where}{key}")]
+    for key in declared & set(node.keys()):
+        value = node._get_node(key)
+        if isinstance(value, DictConfig) and not value._is_none() and not value._is_missing():
+            unknown += _unknown_keys(value, f"{where}{key}.")
+    return unknown
+
+
+def _known_keys(schema: type, where: str = "") -> list[str]:
+    """Every key ``schema`` declares, nested schemas' included (for a did-you-mean hint)."""
+    keys = []
+    for name, hint in typing.get_type_hints(schema).items():
+        keys.append(f"{where}{name}")
+        if isinstance(hint, type) and dataclasses.is_dataclass(hint):
+            keys += _known_keys(hint, f"{where}{name}.")
+    return keys
+
+
+def _check_known_keys(cfg: DictConfig) -> None:
+    unknown = _unknown_keys(cfg, "")
+    if not unknown:
+        return
+    key = unknown[0]
+    algo_schema = ALGO_SCHEMAS.get(str(OmegaConf.select(cfg, "algo.name")), AlgoConfig)
+    close = difflib.get_close_matches(key, _known_keys(Config) + _known_keys(algo_schema, "algo."), n=1)
+    hint = f"; did you mean {close[0]}?" if close else ""
+    raise ConfigValueError(f"config key {key} is unknown (added with +{key}=...?): no schema declares it, so the run "
+                           f"would store it and ignore it{hint}")
+
+
+def _check_sizes(cfg: DictConfig) -> None:
+    """Sizes that must agree with each other; what they cost in memory is checked with the
+    window built (:mod:`~torchrl_causal.trainers.memory`)."""
+    if cfg.window.k >= cfg.env.horizon:
+        raise ConfigValueError(f"window.k={cfg.window.k} must be < env.horizon={cfg.env.horizon}: a window reaches "
+                               "at most horizon - 1 steps back (each lag adds a copy of the state to every observation)")
+
+
 def _check_expert(cfg: DictConfig) -> None:
     if cfg.env.expert is None:
         raise ConfigValueError(
@@ -497,6 +552,10 @@ def _check_algorithm(cfg: DictConfig) -> None:
                                "ratio needs the actor that collected the rollout, not a copy with a fresh dropout mask")
     if not issubclass(schema, OffPolicyConfig):
         return
+    if algo.total_steps <= algo.random_steps:
+        raise ConfigValueError(f"algo.total_steps={algo.total_steps} must be > algo.random_steps={algo.random_steps}: "
+                               "the run would end in its random warm-up without a gradient step; raise "
+                               "algo.total_steps or lower algo.random_steps")
     if algo.random_steps % algo.frames_per_batch:
         raise ConfigValueError(f"algo.random_steps={algo.random_steps} must be a multiple of algo.frames_per_batch="
                                f"{algo.frames_per_batch}: random actions are drawn for whole collector batches")
@@ -528,7 +587,9 @@ def validate_config(cfg: DictConfig) -> None:
     """Resolves every interpolation of a composed config and checks every range.
 
     Raises:
-        ConfigValueError: naming the key, its value and the allowed range; a device this
+        ConfigValueError: naming the key, its value and the allowed range; a key no
+            schema declares (added with ``+key=value``); a window as long as the horizon;
+            an off-policy budget no longer than its random warm-up; a device this
             machine lacks; ``compile=true`` where torch.compile cannot run; GAIL's actor with dropout; off-policy counts that do not
             divide (``random_steps`` by ``frames_per_batch``, ``num_envs`` by
             ``collector_workers``); the env without an expert; a logger or a
@@ -545,7 +606,9 @@ def validate_config(cfg: DictConfig) -> None:
         torchrl_causal.experiment.schema.ConfigValueError: config value eval.final_episodes=0 is out of range: it must be >= 1
     """
     OmegaConf.to_container(cfg, resolve=True, throw_on_missing=True)
+    _check_known_keys(cfg)
     _check_ranges(cfg, "")
+    _check_sizes(cfg)
     _check_device(cfg)
     _check_algorithm(cfg)
     _check_target_entropy(cfg)

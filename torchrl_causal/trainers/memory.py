@@ -1,0 +1,227 @@
+"""What a run will hold in memory and on disk, estimated before anything is allocated.
+
+Every size a config controls multiplies into arrays: the window's ``k`` widens every
+encoded observation (one copy of the admissible state per lag), ``demos.episodes`` and
+``env.horizon`` bound the demonstration transitions, ``algo.buffer_size`` the policy
+replay buffer, ``algo.num_envs``, ``algo.frames_per_batch``, GAIL's rollouts and
+``eval.num_envs`` the batches in flight. A config whose product exceeds the machine does
+not fail cleanly by itself: it grows until the kernel kills it (``window.k=100000`` on
+RoverMaze-U reached 24 GB in 99 s). So :func:`run_footprint` adds up the dominant arrays
+of a run from the sizes of its specs (one env of batch size 1 is built, nothing else),
+and :func:`check_footprint` refuses a run that would not fit, naming the biggest items
+and the keys that set them, before its run directory exists.
+
+The estimate counts what scales with the config, each array at its stored size (measured
+against the tensors themselves in ``tests/test_memory.py``), plus the libraries' fixed
+cost; the networks (a few MB at Appendix E's widths) are left out.
+
+Examples:
+    >>> footprint = Footprint(ram={"encoded demonstrations (demos.episodes x env.horizon)": 3 * GB,
+    ...                            "libraries": LIBRARIES_BYTES}, disk={})
+    >>> check_footprint(footprint, available_ram=8 * GB, free_disk=GB)  # fits
+    >>> check_footprint(footprint, available_ram=2 * GB, free_disk=GB)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    torchrl_causal.trainers.schema.ConfigValueError: this run needs an estimated 3.5 GB of memory ...
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+from omegaconf import DictConfig, OmegaConf
+from torchrl.data import Composite, TensorSpec
+
+from torchrl_causal.trainers.builders import make_env, make_imitator_env, make_window
+from torchrl_causal.trainers.schema import ConfigValueError, GAILConfig, OffPolicyConfig
+
+__all__ = ["GB", "LIBRARIES_BYTES", "Footprint", "available_memory", "check_footprint", "check_run_fits", "encoded_transition_bytes",
+           "free_disk", "run_footprint", "spec_bytes", "transition_bytes"]
+
+GB = 1 << 30
+#: Resident memory of a process that imported the package (torch, TorchRL, MuJoCo):
+#: 0.47 GB measured with ``/usr/bin/time -f %M python -c "import torchrl_causal.train"``.
+LIBRARIES_BYTES = GB // 2
+#: Windows up to this many lags are built to measure their width; longer ones are extrapolated.
+EXACT_K = 16
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """Estimated bytes per item, in memory (``ram``) and on disk (``disk``); each item's
+    name says which config keys set it."""
+
+    ram: dict[str, int]
+    disk: dict[str, int]
+
+    @property
+    def ram_bytes(self) -> int:
+        return sum(self.ram.values())
+
+    @property
+    def disk_bytes(self) -> int:
+        return sum(self.disk.values())
+
+
+def spec_bytes(spec: TensorSpec) -> int:
+    """Bytes of one sample of ``spec`` (every leaf of a composite one).
+
+    Examples:
+        >>> from torchrl.data import Composite, Unbounded
+        >>> spec_bytes(Composite(a=Unbounded((3,)), b=Unbounded((2, 2), dtype=torch.float64)))
+        44
+    """
+    if isinstance(spec, Composite):
+        return sum(spec_bytes(leaf) for leaf in spec.values(True, True))
+    return math.prod(spec.shape) * spec.dtype.itemsize
+
+
+def transition_bytes(observation: TensorSpec, action: TensorSpec) -> int:
+    """Bytes of one replay transition as the losses read it (``observation``, ``action``,
+    ``("next", "observation")``, float32 reward, bool done / terminated and expert flags),
+    from the imitator env's encoded ``observation`` spec and its action spec."""
+    return 2 * spec_bytes(observation) + spec_bytes(action) + 4 + 3
+
+
+def _demonstration_transitions(cfg: DictConfig) -> int:
+    """The stored set's transition count when it exists, else its bound (every episode
+    as long as the horizon)."""
+    from torchrl_causal.data.demonstrations import DatasetError, read_metadata
+
+    try:
+        return int(read_metadata(cfg.demos.path)["transitions"])
+    except (DatasetError, KeyError, TypeError, ValueError):
+        return cfg.demos.episodes * cfg.env.horizon
+
+
+def _encoded_transition_bytes(cfg: DictConfig, k: int) -> int:
+    """:func:`transition_bytes` of the imitator env of ``cfg`` with a window of ``k`` lags."""
+    small = cfg.copy()
+    small.window.k = k
+    env = make_imitator_env(small, make_window(small), "train", 1, cfg.seed)
+    try:
+        return transition_bytes(env.observation_spec["observation"], env.full_action_spec["action"])
+    finally:
+        env.close()
+
+
+def encoded_transition_bytes(cfg: DictConfig) -> int:
+    """:func:`transition_bytes` of the run's imitator env, without building its window
+    when ``window.k`` is large: every lag past the first few holds the same variables, so
+    the width grows linearly in ``k`` and is extrapolated from ``k = 8`` and ``k = 16``
+    (a window of ``k`` lags takes O(k^2) to build: 50 s at ``k = 999``)."""
+    k = cfg.window.k
+    if k <= EXACT_K:
+        return _encoded_transition_bytes(cfg, k)
+    low, high = _encoded_transition_bytes(cfg, EXACT_K // 2), _encoded_transition_bytes(cfg, EXACT_K)
+    return high + (high - low) * (k - EXACT_K) // (EXACT_K - EXACT_K // 2)
+
+
+def run_footprint(cfg: DictConfig) -> Footprint:
+    """The dominant arrays of a run of ``cfg`` (validated)."""
+    base = make_env(cfg, "train", 1, cfg.seed)
+    try:
+        raw_step = 2 * spec_bytes(base.full_observation_spec) + spec_bytes(base.full_action_spec)
+    finally:
+        base.close()
+    if not cfg.algo.trainer:  # the expert row only evaluates
+        return Footprint(ram={"libraries": LIBRARIES_BYTES,
+                              "evaluation envs (eval.num_envs)": 4 * cfg.eval.num_envs * raw_step}, disk={})
+    step = encoded_transition_bytes(cfg)
+    algo, schema = cfg.algo, OmegaConf.get_type(cfg.algo)
+    demos = _demonstration_transitions(cfg)
+    ram = {
+        "libraries": LIBRARIES_BYTES,
+        # the raw set while it is collected; encoded, then copied once into the expert buffer / BC's split
+        "demonstrations (demos.episodes x env.horizon)": demos * raw_step,
+        "encoded demonstrations (demos.episodes x env.horizon x window.k)": 2 * demos * step,
+        # the env's step and the window's lag ring, a few copies per step
+        "evaluation envs (eval.num_envs x window.k)": 4 * cfg.eval.num_envs * step,
+    }
+    disk = {} if Path(cfg.demos.path).exists() else {"demonstration set (demos.episodes x env.horizon)": demos * raw_step}
+    if issubclass(schema, OffPolicyConfig):
+        ram["collector batches (algo.frames_per_batch x window.k)"] = 2 * algo.frames_per_batch * step
+        disk["policy replay buffer (algo.buffer_size x window.k)"] = min(algo.buffer_size, algo.total_steps) * step
+    elif schema is GAILConfig:
+        ram["GAIL rollouts (algo.episodes_per_round x env.horizon x window.k)"] = (
+            2 * algo.episodes_per_round * cfg.env.horizon * step)
+    return Footprint(ram=ram, disk=disk)
+
+
+def _meminfo_available() -> int | None:
+    try:
+        with open("/proc/meminfo") as handle:
+            for line in handle:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def _cgroup_available() -> int | None:
+    """What the cgroup (v2) this process runs in still allows, when it sets a limit."""
+    try:
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        if limit == "max":
+            return None
+        return int(limit) - int(Path("/sys/fs/cgroup/memory.current").read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def available_memory() -> int:
+    """Bytes this process can still allocate without swapping: the kernel's
+    ``MemAvailable``, lowered to the cgroup's remaining limit when there is one."""
+    candidates = [value for value in (_meminfo_available(), _cgroup_available()) if value is not None]
+    if not candidates:
+        candidates = [os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")]
+    return max(0, min(candidates))
+
+
+def free_disk(path: str | os.PathLike) -> int:
+    """Free bytes on the file system that will hold ``path`` (its first existing folder)."""
+    folder = Path(path).absolute()
+    while not folder.exists():
+        folder = folder.parent
+    return shutil.disk_usage(folder).free
+
+
+def _largest(items: dict[str, int], count: int = 3) -> str:
+    biggest = sorted(items.items(), key=lambda item: -item[1])[:count]
+    return ", ".join(f"{name} {value / GB:.1f} GB" for name, value in biggest)
+
+
+def check_footprint(footprint: Footprint, *, available_ram: int, free_disk: int) -> None:
+    """Refuses a run whose estimated memory or disk exceeds what is available.
+
+    Raises:
+        ConfigValueError: naming the estimate, its largest items (and the keys that set
+            them) and what is available.
+    """
+    if footprint.ram_bytes > available_ram:
+        raise ConfigValueError(
+            f"this run needs an estimated {footprint.ram_bytes / GB:.1f} GB of memory ({_largest(footprint.ram)}) "
+            f"and {available_ram / GB:.1f} GB are available: lower the keys named (a smaller window.k, fewer "
+            "demos.episodes or envs), or raise max_memory_gb if this machine has more to give")
+    if footprint.disk_bytes > free_disk:
+        raise ConfigValueError(
+            f"this run needs an estimated {footprint.disk_bytes / GB:.1f} GB of disk ({_largest(footprint.disk)}) "
+            f"and the run root's file system has {free_disk / GB:.1f} GB free: lower the keys named, or choose "
+            "another run_root")
+
+
+def check_run_fits(cfg: DictConfig) -> Footprint:
+    """:func:`check_footprint` of :func:`run_footprint` against this machine (its available
+    memory, or ``cfg.max_memory_gb`` when set, and the free disk below ``cfg.run_dir``)."""
+    footprint = run_footprint(cfg)
+    limit = OmegaConf.select(cfg, "max_memory_gb")
+    ram = available_memory() if limit is None else int(float(limit) * GB)
+    check_footprint(footprint, available_ram=ram, free_disk=free_disk(cfg.run_dir))
+    return footprint
+
