@@ -4,7 +4,6 @@ exactly, overrides reach the run, experiments sweep what the paper sweeps."""
 
 from __future__ import annotations
 
-
 import itertools
 import re
 import subprocess
