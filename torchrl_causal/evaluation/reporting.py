@@ -5,8 +5,9 @@ from __future__ import annotations
 import re
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 from torchrl_causal.evaluation.plots import ABLATION_AXES, plot_ablation, plot_training_curves, plot_trajectories
 from torchrl_causal.evaluation.runs import RunRecord, Setting, load_runs
@@ -27,7 +28,8 @@ from torchrl_causal.evaluation.tables import (
     write_csv,
 )
 
-__all__ = ["Report", "write_report", "kept_command", "kept_notes", "NOTES_BEGIN", "NOTES_END"]
+__all__ = ["Report", "write_report", "kept_command", "kept_notes", "notes_to_keep", "provenance_markdown", "NOTES_BEGIN",
+           "NOTES_END"]
 
 # Hand-written analysis between these markers survives regeneration of the Markdown file.
 NOTES_BEGIN = "<!-- notes: kept when the report is regenerated -->"
@@ -76,6 +78,74 @@ def kept_notes(path: str | Path) -> str:
     """
     match = _search(path, re.escape(NOTES_BEGIN) + r".*?" + re.escape(NOTES_END))
     return match.group(0) if match else ""
+
+
+def notes_to_keep(path: str | Path) -> str:
+    """The notes block a regenerated results file carries: the one ``path`` holds, or an
+    empty one (the place for notes) when ``path`` does not exist yet.
+
+    Raises:
+        FileExistsError: ``path`` exists without the notes markers: regenerating it would
+            delete whatever was written in it by hand.
+
+    Examples:
+        >>> import tempfile, pathlib
+        >>> md = pathlib.Path(tempfile.mkdtemp()) / "r.md"
+        >>> notes_to_keep(md) == f"{NOTES_BEGIN}\\n{NOTES_END}"
+        True
+        >>> _ = md.write_text("# R\\nA reading written by hand.\\n")
+        >>> notes_to_keep(md)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        FileExistsError: .../r.md has no notes markers ...
+    """
+    path = Path(path)
+    if not path.exists():
+        return f"{NOTES_BEGIN}\n{NOTES_END}"
+    notes = kept_notes(path)
+    if not notes:
+        raise FileExistsError(
+            f"{path} has no notes markers ({NOTES_BEGIN} ... {NOTES_END}), so regenerating it would delete any text "
+            "written in it by hand: move that text between the two markers (or delete the file, or write elsewhere "
+            "with out= / name=), then rerun")
+    return notes
+
+
+def _describe_machine(attempt: Mapping[str, Any]) -> str:
+    packages = attempt.get("packages") or {}
+    listed = ", ".join(f"{name} {version or 'absent'}" for name, version in packages.items())
+    threads = attempt.get("threads")
+    cores = attempt.get("cores")
+    return (f"{listed}; Python {attempt.get('python', '?')}; CPU {attempt.get('cpu', '?')}, "
+            f"{threads} thread{'s' if threads != 1 else ''}" + (f" of {cores} cores" if cores else "")
+            + f"; device {attempt.get('device', '?')}" + ("; compiled" if attempt.get("compile") else ""))
+
+
+def provenance_markdown(runs: Sequence[RunRecord]) -> str:
+    """What made ``runs``: each distinct combination of package versions, CPU and threads
+    their attempts recorded (``code.json``), with the runs trained under it; runs recorded
+    before versions were name themselves as unknown.
+
+    Examples:
+        >>> from torchrl_causal.evaluation.runs import RunRecord, Setting
+        >>> attempt = {"packages": {"torch": "2.13.0", "numpy": "2.3.4"}, "python": "3.12.3", "cpu": "Xeon",
+        ...            "threads": 1, "cores": 2, "device": "cpu", "compile": False}
+        >>> record = RunRecord(Path("r/c_sqil/seed0"), "c_sqil", Setting("u", 400, 1.0, 2), 0, {}, attempts=(attempt,))
+        >>> older = replace(record, path=Path("r/bc/seed0"), label="bc", attempts=())
+        >>> print(provenance_markdown([record, older]))
+        - torch 2.13.0, numpy 2.3.4; Python 3.12.3; CPU Xeon, 1 thread of 2 cores; device cpu: 1 run (C-SQIL seed 0)
+        - not recorded (trained before package versions were recorded, or the expert row): 1 run (BC seed 0)
+    """
+    groups: dict[str, list[str]] = defaultdict(list)
+    for run in runs:
+        name = f"{display_name(run.label)} seed {run.seed}"
+        recorded = [attempt for attempt in run.attempts if attempt.get("packages")]
+        if not recorded:
+            groups["not recorded (trained before package versions were recorded, or the expert row)"].append(name)
+        for machine in dict.fromkeys(_describe_machine(attempt) for attempt in recorded):
+            groups[machine].append(name)
+    return "\n".join(f"- {machine}: {len(names)} run{'s' if len(names) != 1 else ''} ({', '.join(names)})"
+                     for machine, names in groups.items())
 
 
 def kept_command(path: str | Path) -> str | None:
@@ -133,9 +203,10 @@ def write_report(runs_root: str | Path | Sequence[str | Path], out_dir: str | Pa
         raise FileNotFoundError(f"no evaluated runs below {', '.join(map(str, roots))} "
                                 "(expected */config.yaml with eval/*.json)")
     out_dir = Path(out_dir) if out_dir is not None else roots[0] / "report"
-    out_dir.mkdir(parents=True, exist_ok=True)
     envs = sorted({run.setting.env for run in runs})
     name = name or (envs[0] if len(envs) == 1 else "report")
+    notes = notes_to_keep(out_dir / f"{name}.md")  # before anything is written
+    out_dir.mkdir(parents=True, exist_ok=True)
     aggregated = aggregate(runs)
     carried_labels = _carry(aggregated, carried) if carried is not None else {}
     main = _main_setting(runs, carried_labels)
@@ -164,9 +235,7 @@ def write_report(runs_root: str | Path | Sequence[str | Path], out_dir: str | Pa
     command = command or kept_command(report.markdown)
     if command:
         lines += ["Regenerate with:", "", "```bash", command.strip(), "```", ""]
-    notes = kept_notes(report.markdown)
-    if notes:
-        lines += [notes, ""]
+    lines += [notes, ""]
     ordered = [main] + sorted(s for s in aggregated if s != main)
     for setting in ordered:
         table = aggregated[setting]
@@ -193,6 +262,10 @@ def write_report(runs_root: str | Path | Sequence[str | Path], out_dir: str | Pa
         checks = effect_checks(table, targets)
         if checks:
             lines += ["### The paper's effect, checked", "", effect_markdown(checks), ""]
+    lines += ["## What made these runs", "",
+              "Package versions, CPU and threads of every training attempt (the runs' `code.json`); another "
+              "CPU, thread count or package version changes floating-point summation order, and the figures with it.",
+              "", provenance_markdown(runs), ""]
     if report.figures:
         lines += ["## Figures", ""]
         lines += [f"![{title}]({path.name})" for title, path in figures.items() if path is not None]

@@ -75,6 +75,9 @@ class RunRecord:
     curve: Sequence[tuple[int, float]] = ()
     unit: str = ""  # what the curve's steps count (env steps, epochs, rounds)
     maze: Mapping[str, Any] | None = field(default=None, compare=False)
+    #: what each attempt trained under (``code.json``: code, packages, CPU, threads); empty
+    #: for a run recorded before attempts were
+    attempts: Sequence[Mapping[str, Any]] = field(default=(), compare=False)
 
 
 def read_scalar_csv(path: str | Path) -> list[tuple[int, float]]:
@@ -125,6 +128,7 @@ def load_run(run_dir: str | Path) -> RunRecord:
         curve=read_scalar_csv(curve_file) if curve_file.is_file() else (),
         unit=run.read_status().get("unit", ""),
         maze=maze,
+        attempts=tuple(run.read_attempts()),
     )
 
 

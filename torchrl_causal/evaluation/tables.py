@@ -391,6 +391,10 @@ class EffectTargets:
         Traceback (most recent call last):
         ...
         ValueError: EffectTargets' thresholds must be finite and >= 0, got causal_fraction=-1
+        >>> EffectTargets(causal_fraction=2)  # no method keeps twice the expert's success
+        Traceback (most recent call last):
+        ...
+        ValueError: EffectTargets' causal_fraction is a fraction of the expert's success, in [0, 1], got 2
     """
 
     causal_fraction: float = 0.8
@@ -402,6 +406,10 @@ class EffectTargets:
             value = getattr(self, name)
             if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"EffectTargets' thresholds must be finite and >= 0, got {name}={value!r}")
+        for name in ("causal_fraction", "non_causal_fraction"):
+            if getattr(self, name) > 1:
+                raise ValueError(f"EffectTargets' {name} is a fraction of the expert's success, in [0, 1], "
+                                 f"got {getattr(self, name)!r}")
 
 
 def effect_checks(table: Table, targets: EffectTargets = EffectTargets()) -> list[EffectCheck]:
