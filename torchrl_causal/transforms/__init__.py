@@ -9,7 +9,8 @@ replay buffers of raw transitions (:class:`EpisodeHistory` and
 """
 
 from torchrl_causal.transforms._layout import FeatureSlice
-from torchrl_causal.transforms.causal_window import CausalWindowTransform, causal_template
+from torchrl_causal.transforms.causal_window import CausalWindowTransform, causal_template, step_keys
 from torchrl_causal.transforms.replay import EpisodeHistory, EpisodeWindowEncoder
 
-__all__ = ["CausalWindowTransform", "EpisodeHistory", "EpisodeWindowEncoder", "FeatureSlice", "causal_template"]
+__all__ = ["CausalWindowTransform", "EpisodeHistory", "EpisodeWindowEncoder", "FeatureSlice", "causal_template",
+           "step_keys"]

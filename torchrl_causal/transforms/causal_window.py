@@ -19,7 +19,7 @@ from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.transforms._layout import FeatureSlice, LagRing, WindowLayout, spec_bounds
 from torchrl_causal.transforms.replay import EpisodeHistory, EpisodeWindowEncoder
 
-__all__ = ["CausalWindowTransform", "causal_template"]
+__all__ = ["CausalWindowTransform", "causal_template", "step_keys"]
 
 #: Sub-tensordicts of a confounded env that no imitator may see: the variables latent to
 #: the imitator, and the structural causal model's own (the confounder U).
@@ -467,7 +467,8 @@ class CausalWindowTransform(Transform):
         """
         return EpisodeWindowEncoder(self), EpisodeHistory(self.window.k, traj_key=traj_key)
 
-    def encode_trajectories(self, trajectories: TensorDictBase) -> TensorDictBase:
+    def encode_trajectories(self, trajectories: TensorDictBase, *,
+                            keys: Sequence[NestedKey] | None = None) -> TensorDictBase:
         """Encodes stored, time-ordered transitions exactly as the online transform would.
 
         Args:
@@ -478,11 +479,21 @@ class CausalWindowTransform(Transform):
                 ``"next"``, and either ``"is_init"`` (True at each episode's first step,
                 TorchRL's ``InitTracker`` convention) or ``("next", "done")``.
 
+        Keyword Args:
+            keys: keep exactly these keys of the encoding (:func:`step_keys` of the
+                transformed env gives what its collector stores), so that it extends the
+                same replay buffer as, or concatenates with, collector batches. Defaults
+                to every key left (the dataset's own, such as ``"is_init"`` and
+                ``"episode"``, included).
+
         Returns:
             A new TensorDict with ``out_key`` and ``("next", out_key)`` written and the
             hidden keys (``excluded`` and ``"latent"``) removed at both levels. Step
             ``t`` of an episode reads rows ``t - lag`` of the same episode (zero before
             its start), gathered for all rows at once in chunks of ``chunk_size``.
+
+        Raises:
+            KeyError: a key of ``keys`` that the encoding lacks, named.
         """
         if trajectories.batch_dims == 0:
             raise ValueError("encode_trajectories needs a time dimension, got a TensorDict with batch_size=[]")
@@ -527,7 +538,12 @@ class CausalWindowTransform(Transform):
         out = trajectories.exclude(*hidden)
         out.set(self.out_key, encoding.reshape(*shape, -1))
         out.set(("next", self.out_key), next_encoding.reshape(*shape, -1))
-        return out
+        if keys is None:
+            return out
+        missing = [key for key in keys if key not in out.keys(True, True)]
+        if missing:
+            raise KeyError(f"the encoded trajectories lack {missing}: the stored data does not record them")
+        return out.select(*keys)
 
     def _layout_from_data(self, flat: TensorDictBase) -> WindowLayout:
         leaves = {}
@@ -612,6 +628,30 @@ class CausalWindowTransform(Transform):
             f"{type(self).__name__}(k={self.window.k}, lags=[{lags}], hidden={list(self.hidden_keys)}, "
             f"out_key={self.out_key!r})"
         )
+
+
+def step_keys(env: EnvBase) -> list[NestedKey]:
+    """The keys of every step a collector of ``env`` stores, its own ``("collector", ...)``
+    bookkeeping aside: observations, actions and done flags at the root, observations,
+    rewards and done flags under ``"next"``.
+
+    With :meth:`CausalWindowTransform.encode_trajectories` (``keys=step_keys(env)``)
+    demonstrations become transitions of exactly a collector batch's keys.
+
+    Examples:
+        >>> from torchrl.envs import TransformedEnv
+        >>> from torchrl_causal.envs import RouteChoiceEnv
+        >>> base = RouteChoiceEnv(batch_size=[2], seed=0)
+        >>> env = TransformedEnv(base, CausalWindowTransform.from_env(base, k=0))
+        >>> keys = step_keys(env)
+        >>> sorted(map(str, keys)) == sorted(map(str, env.rollout(1).keys(True, True)))
+        True
+    """
+    observations = list(env.full_observation_spec.keys(True, True))
+    done = list(env.full_done_spec.keys(True, True))
+    root = [*observations, *env.full_action_spec.keys(True, True), *done]
+    following = [*observations, *env.full_reward_spec.keys(True, True), *done]
+    return [unravel_key(key) for key in root] + [unravel_key(("next", key)) for key in following]
 
 
 def causal_template(env: EnvBase) -> TimeSliceTemplate:
