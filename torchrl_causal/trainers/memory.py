@@ -40,7 +40,7 @@ from torchrl.data import Composite, TensorSpec
 from torchrl_causal.trainers.builders import make_env, make_imitator_env, make_window
 from torchrl_causal.trainers.schema import ConfigValueError, GAILConfig, OffPolicyConfig
 
-__all__ = ["GB", "LIBRARIES_BYTES", "Footprint", "available_memory", "check_footprint", "check_run_fits", "encoded_transition_bytes",
+__all__ = ["GB", "LIBRARIES_BYTES", "Footprint", "available_memory", "check_footprint", "check_run_fits", "encoded_transition_bytes", "measured_transition_bytes",
            "free_disk", "run_footprint", "spec_bytes", "transition_bytes"]
 
 GB = 1 << 30
@@ -99,7 +99,7 @@ def _demonstration_transitions(cfg: DictConfig) -> int:
         return cfg.demos.episodes * cfg.env.horizon
 
 
-def _encoded_transition_bytes(cfg: DictConfig, k: int) -> int:
+def measured_transition_bytes(cfg: DictConfig, k: int) -> int:
     """:func:`transition_bytes` of the imitator env of ``cfg`` with a window of ``k`` lags."""
     small = cfg.copy()
     small.window.k = k
@@ -117,8 +117,8 @@ def encoded_transition_bytes(cfg: DictConfig) -> int:
     (a window of ``k`` lags takes O(k^2) to build: 50 s at ``k = 999``)."""
     k = cfg.window.k
     if k <= EXACT_K:
-        return _encoded_transition_bytes(cfg, k)
-    low, high = _encoded_transition_bytes(cfg, EXACT_K // 2), _encoded_transition_bytes(cfg, EXACT_K)
+        return measured_transition_bytes(cfg, k)
+    low, high = measured_transition_bytes(cfg, EXACT_K // 2), measured_transition_bytes(cfg, EXACT_K)
     return high + (high - low) * (k - EXACT_K) // (EXACT_K - EXACT_K // 2)
 
 
