@@ -40,8 +40,9 @@ from torchrl.data import Composite, TensorSpec
 from torchrl_causal.trainers.builders import make_env, make_imitator_env, make_window
 from torchrl_causal.trainers.schema import ConfigValueError, GAILConfig, OffPolicyConfig
 
-__all__ = ["GB", "LIBRARIES_BYTES", "Footprint", "available_memory", "check_footprint", "check_run_fits", "encoded_transition_bytes", "measured_transition_bytes",
-           "free_disk", "run_footprint", "spec_bytes", "transition_bytes"]
+__all__ = ["GB", "LIBRARIES_BYTES", "Footprint", "available_memory", "check_footprint", "check_run_fits",
+           "encoded_transition_bytes", "free_disk", "measured_transition_bytes", "run_footprint", "spec_bytes",
+           "transition_bytes"]
 
 GB = 1 << 30
 #: Resident memory of a process that imported the package (torch, TorchRL, MuJoCo):
