@@ -20,14 +20,18 @@ change nothing.
 from __future__ import annotations
 
 import logging
+import multiprocessing
+import multiprocessing.connection
+import os
 import signal
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from types import FrameType
+from typing import Any
 
-__all__ = ["RunInterrupted", "DeferredSignals", "deferred_signals", "signals_raise"]
+__all__ = ["RunInterrupted", "DeferredSignals", "deferred_signals", "run_in_processes", "signals_raise"]
 
 log = logging.getLogger(__name__)
 
@@ -146,3 +150,77 @@ def deferred_signals() -> Iterator[DeferredSignals]:
     signals = DeferredSignals()
     with _handlers(signals._handle):
         yield signals
+
+
+def _worker(function: Callable[[Any], int], task: Any, stop: Any) -> None:
+    """A worker process: out of the terminal's process group (its parent forwards signals,
+    once), signals raising :class:`RunInterrupted` from here on, ``function(task)``'s
+    status as its exit status."""
+    os.setpgrp()
+    code = 128 + signal.SIGINT
+    try:
+        with signals_raise():
+            if not stop.is_set():  # a signal reached the parent while this process was starting
+                code = int(function(task))
+    except RunInterrupted as stop_signal:
+        code = stop_signal.exit_code
+    raise SystemExit(code)
+
+
+@contextmanager
+def _ignored_signals() -> Iterator[None]:
+    """SIGINT and SIGTERM ignored: a process spawned now inherits that through its start-up
+    (the interpreter keeps an ignored SIGINT ignored), so it cannot die in its imports."""
+    previous = {number: signal.signal(number, signal.SIG_IGN) for number in _SIGNALS}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+def run_in_processes(function: Callable[[Any], int], tasks: Sequence[Any], workers: int) -> list[int | None]:
+    """Runs ``function(task)`` for every task in fresh (spawned) processes, ``workers`` at a
+    time; returns each task's exit status, ``None`` for a task never started.
+
+    ``function`` (importable, picklable) returns an exit status, 0 for success. On the
+    first SIGINT or SIGTERM (or the first non-zero status) no further task starts; the
+    signal is forwarded once to every running worker, which (running a trainer) finishes its
+    step, checkpoints and exits with ``128 + signal``. A second signal is forwarded too:
+    the workers stop at once. Workers run in their own process groups, so a terminal's
+    Ctrl-C reaches them only through this forwarding, never twice.
+
+    Must be called from the main thread (it handles the signals).
+    """
+    context = multiprocessing.get_context("spawn")
+    stop = context.Event()
+    codes: list[int | None] = [None] * len(tasks)
+    running: dict[int, multiprocessing.process.BaseProcess] = {}
+
+    def forward(number: int, frame: FrameType | None) -> None:
+        if not stop.is_set():
+            log.warning("%s received: no new run starts; the runs in flight checkpoint and stop (send it again to "
+                        "stop them at once)", signal.Signals(number).name)
+        stop.set()
+        for process in running.values():
+            if process.pid is not None and process.exitcode is None:
+                os.kill(process.pid, number)
+
+    with _handlers(forward):
+        queued = iter(range(len(tasks)))
+        while True:
+            while not stop.is_set() and len(running) < workers and (index := next(queued, None)) is not None:
+                process = context.Process(target=_worker, args=(function, tasks[index], stop))
+                with _ignored_signals():
+                    process.start()
+                running[index] = process
+            if not running:
+                break
+            multiprocessing.connection.wait([process.sentinel for process in running.values()], timeout=1.0)
+            for index, process in list(running.items()):
+                if process.exitcode is not None:
+                    codes[index] = process.exitcode
+                    if process.exitcode != 0:
+                        stop.set()  # an interrupted or failed run: start nothing new
+                    del running[index]
+    return codes
