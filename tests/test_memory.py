@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from torchrl_causal.trainers import ConfigValueError, compose_config, validate_config
-from torchrl_causal.trainers.builders import expert_transitions, load_or_collect_demonstrations, make_window
-from torchrl_causal.trainers.memory import (
+from torchrl_causal.experiment import ConfigValueError, compose_config, validate_config
+from torchrl_causal.experiment.builders import expert_transitions, load_or_collect_demonstrations, make_window
+from torchrl_causal.experiment.memory import (
     EXACT_K,
     GB,
     Footprint,

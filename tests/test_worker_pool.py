@@ -9,7 +9,7 @@ import threading
 import time
 from pathlib import Path
 
-from torchrl_causal.trainers.interrupts import deferred_signals, run_in_processes
+from torchrl_causal.experiment.interrupts import deferred_signals, run_in_processes
 
 
 def steps_until_signalled(folder: str) -> int:

@@ -518,7 +518,7 @@ def _check_known_keys(cfg: DictConfig) -> None:
 
 def _check_sizes(cfg: DictConfig) -> None:
     """Sizes that must agree with each other; what they cost in memory is checked with the
-    window built (:mod:`~torchrl_causal.trainers.memory`)."""
+    window built (:mod:`~torchrl_causal.experiment.memory`)."""
     if cfg.window.k >= cfg.env.horizon:
         raise ConfigValueError(f"window.k={cfg.window.k} must be < env.horizon={cfg.env.horizon}: a window reaches "
                                "at most horizon - 1 steps back (each lag adds a copy of the state to every observation)")

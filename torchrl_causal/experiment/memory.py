@@ -22,7 +22,7 @@ Examples:
     >>> check_footprint(footprint, available_ram=2 * GB, free_disk=GB)  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    torchrl_causal.trainers.schema.ConfigValueError: this run needs an estimated 3.5 GB of memory ...
+    torchrl_causal.experiment.schema.ConfigValueError: this run needs an estimated 3.5 GB of memory ...
 """
 
 from __future__ import annotations
@@ -37,8 +37,8 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from torchrl.data import Composite, TensorSpec
 
-from torchrl_causal.trainers.builders import make_env, make_imitator_env, make_window
-from torchrl_causal.trainers.schema import ConfigValueError, GAILConfig, OffPolicyConfig
+from torchrl_causal.experiment.builders import make_env, make_imitator_env, make_window
+from torchrl_causal.experiment.schema import ConfigValueError, GAILConfig, OffPolicyConfig
 
 __all__ = ["GB", "LIBRARIES_BYTES", "Footprint", "available_memory", "check_footprint", "check_run_fits",
            "encoded_transition_bytes", "free_disk", "measured_transition_bytes", "run_footprint", "spec_bytes",
