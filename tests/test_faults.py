@@ -16,6 +16,7 @@ against the real thing.
 from __future__ import annotations
 
 import hashlib
+import json
 import logging
 import os
 import runpy
@@ -32,19 +33,22 @@ from pathlib import Path
 
 import pytest
 
-import torchrl_causal.archive  # noqa: F401  (imported once here, before the forks)
-import torchrl_causal.evaluate  # noqa: F401
-import torchrl_causal.filmstrip  # noqa: F401
-import torchrl_causal.report  # noqa: F401
-import torchrl_causal.status  # noqa: F401
-import torchrl_causal.strength_ablation  # noqa: F401
-import torchrl_causal.train  # noqa: F401
+# Imported once here, before the forks. The commands' own modules (torchrl_causal.train...)
+# are not: each case runs its module as __main__, as ``python -m`` does.
+import torchrl_causal.cli.archive  # noqa: F401
+import torchrl_causal.cli.evaluate  # noqa: F401
+import torchrl_causal.cli.filmstrip  # noqa: F401
+import torchrl_causal.cli.report  # noqa: F401
+import torchrl_causal.cli.status  # noqa: F401
+import torchrl_causal.cli.strength_ablation  # noqa: F401
+import torchrl_causal.cli.train  # noqa: F401
 
 TINY_BC = ["env=rovermaze_u", "env.horizon=40", "window.k=2", "algo=bc", "threads=1", "demos.episodes=6",
            "eval.episodes=4", "eval.num_envs=4", "eval.final_episodes=8", "algo.actor.hidden=16",
            "algo.actor.num_blocks=1", "algo.epochs=2", "algo.eval_every=1", "progress_bar=false"]
 RUN = "rovermaze_u/h40-cs1.0-k2/c_bc/seed0"  # where TINY_BC's run lands below its run root
-MAX_STDERR_LINES = 4
+MAX_STDERR_LINES = 3
+HYDRA_MAX_STDERR_LINES = 7  # Hydra's own report of an override it refuses: what, where, HYDRA_FULL_ERROR
 
 
 @dataclass
@@ -90,13 +94,15 @@ class Case:
     says: str
     setup: Callable[[Path], None] | None = None
     prepare: Callable[[], None] | None = None
-    interrupt_after_s: float | None = None
+    interrupt_after_s: float | None = None  # SIGINT this long after the start; the run may then hold a checkpoint
     root: Path = field(default=Path())
 
 
 def _snapshot(root: Path) -> dict[str, str]:
+    """Every path below ``root`` with its content's hash; a run's ``.lock`` aside (each
+    attempt writes its pid there, holding it)."""
     return {str(path.relative_to(root)): hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else "dir"
-            for path in sorted(root.rglob("*"))}
+            for path in sorted(root.rglob("*")) if path.name != ".lock"}
 
 
 def run_forked(cases: list[Case], parallel: int = 3, timeout_s: float = 120.0) -> dict[str, Outcome]:
@@ -160,6 +166,8 @@ def _trained_run(cache: Path) -> Path:
 def _copy_of(trained: Path) -> Callable[[Path], None]:
     def setup(root: Path) -> None:
         shutil.copytree(trained, root, dirs_exist_ok=True)
+        config = root / RUN / "config.yaml"  # as if trained here: its run_root, run_dir and demos.path
+        config.write_text(config.read_text().replace(str(trained), str(root)))
     return setup
 
 
@@ -220,8 +228,9 @@ def _cases(trained: Path) -> list[Case]:
              setup=_write("afile", b"not a folder")),
         Case("train tensorboard missing", T, [*fresh, "logger=tensorboard"], "tensorboard", prepare=_without_tensorboard),
         Case("train demonstrations corrupted", T, [*rerun, "seed=1"], "delete", setup=_then(run, _corrupt_demos)),
-        Case("train checkpoint corrupted", T, [*rerun, "algo.epochs=4"], "last.pt",
-             setup=_then(run, _write(f"{RUN}/checkpoints/last.pt", b"garbage"))),
+        Case("train checkpoint corrupted", T, rerun, "last.pt",
+             setup=_then(_then(run, _write(f"{RUN}/checkpoints/last.pt", b"garbage")),
+                         _write(f"{RUN}/status.json", b'{"status": "interrupted", "progress": 1, "total": 2}'))),
         Case("train status corrupted", T, rerun, "status.json", setup=_then(run, _write(f"{RUN}/status.json", b"{"))),
         Case("train config changed", T, [*rerun, "algo.batch_size=7"], "holds a run of another config", setup=run),
         Case("train interrupted at start", T, [*fresh, "algo.epochs=500"], "Resume with", interrupt_after_s=1.0),
@@ -305,18 +314,21 @@ def test_every_bad_input_fails_with_one_line_and_leaves_the_run_root_as_it_was(t
     failures = []
     for case in cases:
         outcome = outcomes[case.name]
-        lines = [line for line in outcome.stderr.splitlines() if line.strip() and "Warning" not in line]
+        lines = [line for line in outcome.stderr.splitlines() if line.strip()]
         problems = []
         if outcome.code == 0:
             problems.append("exit status 0")
         if "Traceback" in outcome.stderr:
             problems.append("a traceback")
-        if not lines or len(lines) > MAX_STDERR_LINES:
+        hydra = "HYDRA_FULL_ERROR" in outcome.stderr
+        if not lines or len(lines) > (HYDRA_MAX_STDERR_LINES if hydra else MAX_STDERR_LINES):
             problems.append(f"{len(lines)} lines on stderr")
         if case.says.lower() not in outcome.stderr.lower():
             problems.append(f"no {case.says!r}")
         after = _snapshot(case.root)
-        if after != before[case.name]:
+        resumable = case.interrupt_after_s is not None and all(
+            json.loads(path.read_text())["status"] == "interrupted" for path in case.root.rglob("status.json"))
+        if after != before[case.name] and not resumable:
             changed = sorted(set(after.items()) ^ set(before[case.name].items()))
             problems.append(f"the run root changed: {changed[:4]}")
         if problems:

@@ -14,7 +14,6 @@ the training step in flight, checkpoints, marks the run interrupted and raises
 
 from __future__ import annotations
 
-import json
 import logging
 import shutil
 from collections.abc import Iterator
@@ -26,14 +25,17 @@ from hydra.utils import get_class
 from omegaconf import DictConfig
 from tensordict.nn import TensorDictModuleBase
 
+from torchrl_causal.data.demonstrations import DatasetError
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.experiment.builders import check_demonstrations, make_window
 from torchrl_causal.experiment.config import register_resolvers
 from torchrl_causal.experiment.device import resolve_device
 from torchrl_causal.experiment.interrupts import RunInterrupted, signals_raise
-from torchrl_causal.experiment.run_directory import RunDirectory
-from torchrl_causal.experiment.schema import validate_config
+from torchrl_causal.experiment.memory import check_run_fits
+from torchrl_causal.experiment.provenance import attempt_identity
+from torchrl_causal.experiment.run_directory import CheckpointError, RunDirectory
+from torchrl_causal.experiment.schema import ConfigValueError, validate_config
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.trainers.base import Trainer
 
@@ -90,8 +92,11 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
         RunInterrupted: on SIGINT/SIGTERM/SIGUSR2, after checkpointing and marking the run interrupted.
     """
     validate_config(cfg)
+    _check_run_root(Path(cfg.run_dir))
+    check_run_fits(cfg)  # before the window: a long one takes long to build
     trainer_class: type[Trainer] | None = get_class(cfg.algo.trainer) if cfg.algo.trainer else None
     total = trainer_class.budget(cfg) if trainer_class else 0
+    window = make_window(cfg) if trainer_class else None
     run_dir = RunDirectory(cfg.run_dir)
     created = _first_missing(run_dir.path)  # what a failure before any checkpoint removes
     if trainer_class is not None and created is not None:
@@ -106,11 +111,21 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
         if not cfg.resume:
             run_dir.discard()
             created = created or run_dir.path
-        return _claim_and_run(cfg, run_dir, trainer_class, total, created)
+        return _claim_and_run(cfg, run_dir, trainer_class, window, total, created)
 
 
-def _claim_and_run(cfg: DictConfig, run_dir: RunDirectory, trainer_class: type[Trainer] | None, total: int,
-                   created: Path | None) -> dict[str, EvaluationResult]:
+def _check_run_root(run_dir: Path) -> None:
+    """Refuses a run directory below a file (``run_root=<a file>``) before anything is made."""
+    for folder in (run_dir, *run_dir.parents):
+        if folder.exists():
+            if not folder.is_dir():
+                raise ConfigValueError(f"run_root / run_dir {run_dir} lies below {folder}, which is a file, not a "
+                                       "folder: choose another run_root")
+            return
+
+
+def _claim_and_run(cfg: DictConfig, run_dir: RunDirectory, trainer_class: type[Trainer] | None,
+                   window: AdjustmentWindow | None, total: int, created: Path | None) -> dict[str, EvaluationResult]:
     extendable = trainer_class is not None and trainer_class.extendable_budget(cfg)
     run_dir.claim(cfg, ignored=(trainer_class.budget_key,) if extendable else ())
     status = run_dir.read_status()
@@ -119,10 +134,15 @@ def _claim_and_run(cfg: DictConfig, run_dir: RunDirectory, trainer_class: type[T
         return _stored_results(run_dir)
     with _run_log(run_dir), signals_raise():
         try:
-            return _train_and_evaluate(cfg, run_dir, trainer_class, total)
+            return _train_and_evaluate(cfg, run_dir, trainer_class, window, total)
         except RunInterrupted:
             if run_dir.read_status().get("status") != "interrupted":  # stopped outside the training loop
                 run_dir.update_status("interrupted")
+            raise
+        except (CheckpointError, DatasetError):
+            # a file to fix before the run can go on: the run stays as it was (a new one is removed)
+            if created is not None and not run_dir.last_checkpoint.is_file():
+                shutil.rmtree(created, ignore_errors=True)
             raise
         except Exception as error:
             if created is not None and not run_dir.last_checkpoint.is_file():
@@ -133,13 +153,14 @@ def _claim_and_run(cfg: DictConfig, run_dir: RunDirectory, trainer_class: type[T
 
 
 def _train_and_evaluate(cfg: DictConfig, run_dir: RunDirectory, trainer_class: type[Trainer] | None,
-                        total: int) -> dict[str, EvaluationResult]:
+                        window: AdjustmentWindow | None, total: int) -> dict[str, EvaluationResult]:
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.threads)
-    window = make_window(cfg) if trainer_class else None
     evaluator = Evaluator(cfg, window, progress=cfg.progress_bar)
     policy = None  # the env's expert
-    if trainer_class is not None:
+    if trainer_class is None:  # what the trainer records for a trained run: code, packages, CPU, threads
+        run_dir.record_attempt(attempt_identity(None, cfg.compile, resolve_device(cfg.device)), progress=0)
+    else:
         run_dir.write_json(run_dir.window_file, window.to_dict())
         trainer = trainer_class(cfg, run_dir, window, evaluator.periodic)
         trainer.fit()
@@ -191,9 +212,20 @@ def open_run(run_dir: str | Path, *, confounding_strength: float | None = None,
             resolve_device(cfg.device)
         except ValueError:
             cfg.device = "cpu"
-    window = AdjustmentWindow.from_dict(json.loads(run.window_file.read_text())) if cfg.algo.trainer else None
+    window = AdjustmentWindow.from_dict(run.read_json(run.window_file)) if cfg.algo.trainer else None
     evaluator = Evaluator(cfg, window, progress=True)
     return run, evaluator, evaluator.load_best_policy(run) if window is not None else None
+
+
+def _check_evaluation(regime: str, episodes: int, num_envs: int | None, trajectories: int,
+                      confounding_strength: float | None) -> None:
+    if regime not in REGIMES:
+        raise ValueError(f"regime={regime!r} must be one of {', '.join(REGIMES)}")
+    for name, value, least in (("episodes", episodes, 1), ("num_envs", num_envs, 1), ("trajectories", trajectories, 0)):
+        if value is not None and int(value) < least:
+            raise ValueError(f"{name}={value} is out of range: it must be >= {least}")
+    if confounding_strength is not None and not 0.0 <= float(confounding_strength) <= 1.0:
+        raise ValueError(f"confounding_strength={confounding_strength} is out of range: it must lie in [0, 1]")
 
 
 def evaluate_run(run_dir: str | Path, regime: str = "deploy", episodes: int = 1000, *, num_envs: int | None = None,
@@ -203,10 +235,13 @@ def evaluate_run(run_dir: str | Path, regime: str = "deploy", episodes: int = 10
     ``reuse=True`` a stored record of the same settings is returned instead.
 
     Raises:
-        ValueError: naming ``device`` when it is given and this machine lacks it.
+        ValueError: naming ``device`` when it is given and this machine lacks it, or a
+            value out of range (``regime``, ``episodes``, ``num_envs``, ``trajectories``,
+            ``confounding_strength``).
     """
+    _check_evaluation(regime, episodes, num_envs, trajectories, confounding_strength)
     stored = RunDirectory(run_dir)
-    num_envs = min(int(num_envs or stored.read_config().eval.num_envs), int(episodes))
+    num_envs = min(int(stored.read_config().eval.num_envs if num_envs is None else num_envs), int(episodes))
     record = stored.eval_path(regime, record_settings(int(episodes), int(seed), num_envs, confounding_strength))
     if reuse and record.is_file():
         return EvaluationResult.from_dict(stored.read_json(record))

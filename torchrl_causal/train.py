@@ -1,8 +1,8 @@
 """``python -m torchrl_causal.train``: the command line :mod:`torchrl_causal.cli.train`, kept at this path."""
 
-from torchrl_causal.cli.train import main
+from torchrl_causal.cli.train import entry_point, main
 
-__all__ = ["main"]
+__all__ = ["entry_point", "main"]
 
 if __name__ == "__main__":
-    main()
+    entry_point()

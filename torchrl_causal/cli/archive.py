@@ -15,29 +15,26 @@ are such archives, which ``python -m torchrl_causal.evaluate run_dir=<archived r
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from omegaconf import OmegaConf
-
+from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
 from torchrl_causal.evaluation.runs import archive_runs
 
-__all__ = ["main"]
+__all__ = ["OPTIONS", "main"]
 
-_USAGE = "usage: python -m torchrl_causal.archive runs=<dir> out=<dir> [policies=true]"
+OPTIONS: dict[str, Option] = {"runs": Option(str, placeholder="<dir>"), "out": Option(str, placeholder="<dir>"),
+                              "policies": Option(bool, False)}
 
 
 def main(argv: Sequence[str] | None = None) -> list[Path]:
-    args = OmegaConf.from_cli(list(sys.argv[1:] if argv is None else argv))
-    unknown = set(args) - {"runs", "out", "policies"}
-    if unknown or not {"runs", "out"} <= set(args):
-        raise SystemExit(_USAGE + (f"; unknown argument(s) {sorted(unknown)}" if unknown else ""))
-    archived = archive_runs(args.runs, args.out, policies=bool(args.get("policies", False)))
+    args = parse_arguments("archive", argv_or_sys(argv), OPTIONS)
+    with one_line_errors():
+        archived = archive_runs(args["runs"], args["out"], policies=args["policies"])
     size = sum(path.stat().st_size for run in archived for path in run.rglob("*") if path.is_file())
     for run in archived:
         print(run)
-    print(f"archived {len(archived)} run(s) below {args.out} ({size / 1e6:.1f} MB)")
+    print(f"archived {len(archived)} run(s) below {args['out']} ({size / 1e6:.1f} MB)")
     return archived
 
 

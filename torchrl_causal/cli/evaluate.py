@@ -19,35 +19,49 @@ own default, a thread per core, oversubscribes a small machine that runs anythin
 
 from __future__ import annotations
 
-import sys
+import math
 from collections.abc import Sequence
 
 import torch
-from omegaconf import OmegaConf
 
+from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
 from torchrl_causal.evaluation.metrics import EvaluationResult
-from torchrl_causal.lifecycle import DEFAULT_THREADS, evaluate_run
+from torchrl_causal.experiment.run_directory import CheckpointError
+from torchrl_causal.lifecycle import DEFAULT_THREADS, REGIMES, evaluate_run
 
-__all__ = ["main"]
+__all__ = ["OPTIONS", "main"]
 
-_ARGS = {"run_dir", "regime", "episodes", "num_envs", "seed", "confounding_strength", "save", "reuse", "trajectories",
-         "device", "threads"}
+OPTIONS: dict[str, Option] = {
+    "run_dir": Option(str),
+    "regime": Option(str, "deploy", choices=REGIMES),
+    "episodes": Option(int, 1000, ge=1),
+    "num_envs": Option(int, None, ge=1, placeholder="<the run's eval.num_envs>"),
+    "seed": Option(int, 30_000, ge=0),
+    "confounding_strength": Option(float, None, ge=0.0, le=1.0, placeholder="<the run's>"),
+    "trajectories": Option(int, 0, ge=0),
+    "save": Option(bool, True),
+    "reuse": Option(bool, False),
+    "device": Option(str, None, placeholder="<the run's, else cpu>"),
+    "threads": Option(int, DEFAULT_THREADS, ge=1),
+}
+
+
+def _pm(mean: float, spread: float, digits: int = 1) -> str:
+    """``mean ± spread``, or ``—`` for a mean of no values (no episode succeeded)."""
+    if math.isnan(mean):
+        return "—"
+    return f"{mean:.{digits}f}" + ("" if math.isnan(spread) else f" ± {spread:.{digits}f}")
 
 
 def main(argv: Sequence[str] | None = None) -> EvaluationResult:
-    args = OmegaConf.from_cli(list(sys.argv[1:] if argv is None else argv))
-    unknown = set(args) - _ARGS
-    if unknown or "run_dir" not in args:
-        raise SystemExit("usage: python -m torchrl_causal.evaluate run_dir=<dir> [regime=deploy] [episodes=1000] "
-                         "[num_envs=...] [seed=...] [confounding_strength=...] [trajectories=0] [save=true] [reuse=false] "
-                         "[device=...] [threads=1]"
-                         + (f"; unknown argument(s) {sorted(unknown)}" if unknown else ""))
-    torch.set_num_threads(int(args.get("threads", DEFAULT_THREADS)))
-    result = evaluate_run(**{k: args[k] for k in args if k != "threads"})
+    args = parse_arguments("evaluate", argv_or_sys(argv), OPTIONS)
+    torch.set_num_threads(args.pop("threads"))
+    with one_line_errors(CheckpointError):
+        result = evaluate_run(**args)
     s = result.summary()
-    print(f"{args.run_dir} [{s['regime']}] episodes {s['n_episodes']}: success {100 * s['success_rate']:.1f}% "
+    print(f"{args['run_dir']} [{s['regime']}] episodes {s['n_episodes']}: success {100 * s['success_rate']:.1f}% "
           f"± {100 * s['success_se']:.1f}, E[Y] {s['return_mean']:.1f} ± {s['return_std']:.1f}, "
-          f"successful episode length {s['ep_len_mean']:.0f} ± {s['ep_len_std']:.0f}")
+          f"successful episode length {_pm(s['ep_len_mean'], s['ep_len_std'], 0)}")
     return result
 
 

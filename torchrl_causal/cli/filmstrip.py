@@ -25,7 +25,9 @@ from omegaconf import OmegaConf
 from torchrl.envs import EnvBase
 
 from torchrl_causal.evaluation.metrics import Policy
-from torchrl_causal.evaluation.rendering import Filmstrip, record_filmstrip, save_filmstrips
+from torchrl_causal.cli.arguments import one_line_errors
+from torchrl_causal.evaluation.rendering import Filmstrip, RenderingUnavailable, record_filmstrip, save_filmstrips
+from torchrl_causal.experiment import CheckpointError
 from torchrl_causal.evaluation.video import VIDEO_FORMATS, RecordedVideo, record_video
 from torchrl_causal.lifecycle import open_run
 
@@ -79,6 +81,13 @@ def _record_all(runs: list[str], labels: list[str], record: Callable[[str, str],
 
 
 def main(argv: Sequence[str] | None = None) -> Path:
+    """The command line (see the module docstring); a missing run, a broken checkpoint or an
+    env that cannot render stops with one line."""
+    with one_line_errors(CheckpointError, RenderingUnavailable):
+        return _main(argv)
+
+
+def _main(argv: Sequence[str] | None) -> Path:
     args = OmegaConf.from_cli(list(sys.argv[1:] if argv is None else argv))
     unknown = set(args) - _ARGS
     if unknown or "runs" not in args or "out" not in args:

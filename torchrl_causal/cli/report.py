@@ -14,32 +14,33 @@ whose defaults are 0.8, 0.2 and 10).
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 
-from omegaconf import OmegaConf
-
+from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
 from torchrl_causal.evaluation.reporting import write_report
 from torchrl_causal.evaluation.tables import EffectTargets
 
+__all__ = ["OPTIONS", "main"]
+
+TARGET_KEYS = ("causal_fraction", "non_causal_fraction", "train_gap_points")
+OPTIONS: dict[str, Option] = {
+    "runs": Option(list, placeholder="<dir>|[<dir>,...]"),
+    "out": Option(str, None, placeholder="<runs>/report"),
+    "name": Option(str, None, placeholder="<env name>"),
+    "command": Option(str, None, placeholder="<the file's earlier command>"),
+    "carried": Option(str, None, placeholder="<name>_all.csv"),
+    "causal_fraction": Option(float, EffectTargets.causal_fraction, ge=0.0, le=1.0),
+    "non_causal_fraction": Option(float, EffectTargets.non_causal_fraction, ge=0.0, le=1.0),
+    "train_gap_points": Option(float, EffectTargets.train_gap_points, ge=0.0),
+}
+
 
 def main(argv: Sequence[str] | None = None) -> None:
-    args = OmegaConf.from_cli(list(sys.argv[1:] if argv is None else argv))
-    target_keys = ("causal_fraction", "non_causal_fraction", "train_gap_points")
-    usage = "runs=<dir>|[<dir>,...] [out=<dir>] [name=<str>] [command=<str>] [carried=<csv>] " + " ".join(
-        f"[{key}=<x>]" for key in target_keys)
-    unknown = set(args) - {"runs", "out", "name", "command", "carried", *target_keys}
-    if unknown:
-        raise SystemExit(f"unknown argument(s) {sorted(unknown)}; expected {usage}")
-    if "runs" not in args:
-        raise SystemExit(f"usage: python -m torchrl_causal.report {usage}")
-    try:
-        targets = EffectTargets(**{key: args[key] for key in target_keys if key in args})
-    except ValueError as error:
-        raise SystemExit(str(error)) from error
-    runs = list(args.runs) if OmegaConf.is_list(args.runs) else args.runs
-    report = write_report(runs, args.get("out"), name=args.get("name"), command=args.get("command"),
-                          carried=args.get("carried"), targets=targets)
+    args = parse_arguments("report", argv_or_sys(argv), OPTIONS)
+    targets = EffectTargets(**{key: args.pop(key) for key in TARGET_KEYS})
+    with one_line_errors():
+        report = write_report(args["runs"], args["out"], name=args["name"], command=args["command"],
+                              carried=args["carried"], targets=targets)
     print(report.markdown.read_text())
     print(f"wrote {report.markdown}, {report.csv}, {report.all_csv}" + "".join(f", {p}" for p in report.figures))
 

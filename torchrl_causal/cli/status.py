@@ -29,19 +29,18 @@ Examples:
 
 from __future__ import annotations
 
-import json
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from omegaconf import OmegaConf
-
+from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.experiment.provenance import RUNTIME_FIELDS, identity_changes
 from torchrl_causal.experiment.run_directory import CONFIG_FILE, RunDirectory
 
-__all__ = ["run_statuses", "status_markdown", "main"]
+__all__ = ["OPTIONS", "run_statuses", "status_markdown", "main"]
+
+OPTIONS: dict[str, Option] = {"runs": Option(str, placeholder="<dir>")}
 
 COLUMNS = ("run", "status", "progress", "attempts", "best train return", "train success %", "deploy success %")
 
@@ -69,7 +68,7 @@ def _success(run: RunDirectory, regime: str) -> str:
     path = run.eval_path(regime)
     if not path.is_file():
         return "—"
-    return f"{100 * EvaluationResult.from_dict(json.loads(path.read_text())).success_rate:.1f}"
+    return f"{100 * EvaluationResult.from_dict(run.read_json(path)).success_rate:.1f}"
 
 
 def run_statuses(root: str | Path) -> list[dict[str, str]]:
@@ -77,10 +76,14 @@ def run_statuses(root: str | Path) -> list[dict[str, str]]:
 
     Raises:
         FileNotFoundError: if ``root`` does not exist.
+        NotADirectoryError: if ``root`` is a file.
+        RunFileError: a run's ``status.json`` or evaluation that does not parse, named.
     """
     root = Path(root)
-    if not root.is_dir():
+    if not root.exists():
         raise FileNotFoundError(f"runs folder {root} does not exist")
+    if not root.is_dir():
+        raise NotADirectoryError(f"runs={root} is a file, not a folder of runs")
     rows = []
     for config_file in sorted(root.rglob(CONFIG_FILE)):
         if any(part.startswith(".") for part in config_file.relative_to(root).parts[:-1]):
@@ -108,15 +111,10 @@ def status_markdown(rows: Sequence[dict[str, str]]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    args = OmegaConf.from_cli(list(sys.argv[1:] if argv is None else argv))
-    unknown = set(args) - {"runs"}
-    if unknown or "runs" not in args:
-        raise SystemExit("usage: python -m torchrl_causal.status runs=<dir>")
-    try:
-        rows = run_statuses(args.runs)
-    except FileNotFoundError as error:
-        raise SystemExit(f"error: {error}") from None
-    print(status_markdown(rows) if rows else f"no run directories below {args.runs}")
+    args = parse_arguments("status", argv_or_sys(argv), OPTIONS)
+    with one_line_errors():
+        rows = run_statuses(args["runs"])
+    print(status_markdown(rows) if rows else f"no run directories below {args['runs']}")
 
 
 if __name__ == "__main__":

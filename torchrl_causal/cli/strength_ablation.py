@@ -24,25 +24,33 @@ markers is kept, as :func:`~torchrl_causal.evaluation.write_report` keeps it) an
 from __future__ import annotations
 
 import logging
-import sys
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
 import torch
-from omegaconf import OmegaConf
 
-from torchrl_causal.lifecycle import DEFAULT_THREADS, evaluate_run
+from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
 from torchrl_causal.evaluation.plots import plot_ablation
-from torchrl_causal.evaluation.reporting import kept_notes
+from torchrl_causal.evaluation.reporting import notes_to_keep, provenance_markdown
 from torchrl_causal.evaluation.runs import RunRecord, load_runs
 from torchrl_causal.evaluation.tables import aggregate, display_name, ordered_labels
 from torchrl_causal.experiment import CheckpointError
+from torchrl_causal.lifecycle import DEFAULT_THREADS, evaluate_run
 
-__all__ = ["PAPER_STRENGTHS", "strength_ablation", "strength_markdown", "main"]
+__all__ = ["OPTIONS", "PAPER_STRENGTHS", "strength_ablation", "strength_markdown", "main"]
 
 PAPER_STRENGTHS: tuple[float, ...] = (0.15, 0.5, 0.85, 1.0)  # Appendix F's strength ablation
-_ARGS = {"runs", "strengths", "episodes", "seed", "out", "name", "threads"}
+OPTIONS: dict[str, Option] = {
+    "runs": Option(str, placeholder="<dir>"),
+    "strengths": Option(list, list(PAPER_STRENGTHS), ge=0.0, le=1.0, item=float,
+                        placeholder="[" + ",".join(map(str, PAPER_STRENGTHS)) + "]"),
+    "episodes": Option(int, 1000, ge=1),
+    "seed": Option(int, 30_000, ge=0),
+    "out": Option(str, None, placeholder="<runs>/report"),
+    "name": Option(str, "strength_ablation"),
+    "threads": Option(int, DEFAULT_THREADS, ge=1),
+}
 log = logging.getLogger(__name__)
 
 
@@ -103,33 +111,29 @@ def strength_markdown(records: Sequence[RunRecord]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> Path:
-    cli = list(sys.argv[1:] if argv is None else argv)
-    args = OmegaConf.from_cli(cli)
-    unknown = set(args) - _ARGS
-    if unknown or "runs" not in args:
-        raise SystemExit("usage: python -m torchrl_causal.strength_ablation runs=<dir> [strengths=[0.15,0.5,0.85,1.0]] "
-                         "[episodes=1000] [seed=30000] [out=<dir>] [name=<str>] [threads=1]"
-                         + (f"; unknown argument(s) {sorted(unknown)}" if unknown else ""))
-    strengths = [float(s) for s in args.get("strengths", PAPER_STRENGTHS)]
-    episodes, seed = int(args.get("episodes", 1000)), int(args.get("seed", 30_000))
-    torch.set_num_threads(int(args.get("threads", DEFAULT_THREADS)))  # see torchrl_causal.lifecycle
-    records = strength_ablation(args.runs, strengths, episodes, seed)
-    out = Path(args.get("out", Path(args.runs) / "report"))
-    out.mkdir(parents=True, exist_ok=True)
-    name = args.get("name", "strength_ablation")
-    figure = plot_ablation(aggregate(records), "strength", out / f"{name}.png")
+    cli = argv_or_sys(argv)
+    args = parse_arguments("strength_ablation", cli, OPTIONS)
+    torch.set_num_threads(args["threads"])  # see torchrl_causal.lifecycle
+    out = Path(args["out"] or Path(args["runs"]) / "report")
+    path = out / f"{args['name']}.md"
+    with one_line_errors():
+        notes = notes_to_keep(path)  # before anything is evaluated or written
+        records = strength_ablation(args["runs"], args["strengths"], args["episodes"], args["seed"])
+        out.mkdir(parents=True, exist_ok=True)
+        figure = plot_ablation(aggregate(records), "strength", out / f"{args['name']}.png")
     command = " ".join(["python -m torchrl_causal.strength_ablation", *cli])
     setting = records[0].setting
-    path = out / f"{name}.md"
-    notes = kept_notes(path)
+    trained = list({record.path: record for record in records}.values())
     text = "\n".join([
         f"# Confounding-strength ablation: {setting.env} (H={setting.horizon}, k={setting.k})", "",
         "Regenerate with:", "", "```bash", command, "```", "",
-        *([notes, ""] if notes else []),
-        f"Deploy-regime success rate (%) ± SE of each run's selected policy, {episodes} episodes per strength "
-        f"(evaluation seed {seed}), pooled over the training seeds of each row. "
+        notes, "",
+        f"Deploy-regime success rate (%) ± SE of each run's selected policy, {args['episodes']} episodes per strength "
+        f"(evaluation seed {args['seed']}), pooled over the training seeds of each row. "
         "Strength s rotates the compass by s·π at deployment; training is unchanged.", "",
         strength_markdown(records), "",
+        "What made these runs (package versions, CPU and threads of their training attempts):", "",
+        provenance_markdown(trained), "",
         *([f"![strength ablation]({figure.name})", ""] if figure is not None else []),
     ])
     path.write_text(text)

@@ -21,23 +21,22 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from torchrl_causal.data import DatasetError
+from torchrl_causal.cli.arguments import one_line_errors
 from torchrl_causal.experiment.config import CONFIG_NAME, CONFIG_PATH
-from torchrl_causal.experiment.interrupts import RunInterrupted
-from torchrl_causal.experiment.run_directory import ConfigMismatchError, RunInUseError
-from torchrl_causal.experiment.schema import ConfigValueError
+from torchrl_causal.experiment.interrupts import RunInterrupted, signals_raise
+from torchrl_causal.experiment.run_directory import CheckpointError, RunInUseError
 from torchrl_causal.lifecycle import run
 
-__all__ = ["main"]
+__all__ = ["entry_point", "main"]
 
 
 @hydra.main(config_path=CONFIG_PATH, config_name=CONFIG_NAME, version_base="1.3")
 def main(cfg: DictConfig) -> float:
     """Runs one job; returns its deploy-regime success rate (what a sweeper would optimise)."""
     try:
-        results = run(cfg)
-    except (ConfigValueError, ConfigMismatchError, RunInUseError, DatasetError) as error:
-        raise SystemExit(f"error: {error}") from None
+        # a signal before the run's own handlers (composing, checking, building the window) stops as cleanly
+        with signals_raise(), one_line_errors(CheckpointError, RunInUseError):
+            results = run(cfg)
     except RunInterrupted as stop:
         command = " ".join(["python -m torchrl_causal.train", *HydraConfig.get().overrides.task])
         print(f"{stop}. Resume with: {command}", file=sys.stderr)
@@ -45,5 +44,17 @@ def main(cfg: DictConfig) -> float:
     return results["deploy"].success_rate
 
 
+def entry_point() -> None:
+    """``main`` as the command line runs it: a Ctrl-C while Hydra composes the config (before
+    :func:`main` handles signals) stops with one line too."""
+    try:
+        main()
+    except KeyboardInterrupt:
+        command = " ".join(["python -m torchrl_causal.train", *sys.argv[1:]])
+        print(f"interrupted by SIGINT before the run started, nothing was written. Resume with: {command}",
+              file=sys.stderr)
+        raise SystemExit(130) from None
+
+
 if __name__ == "__main__":
-    main()
+    entry_point()

@@ -130,7 +130,8 @@ class Evaluator:
         device = resolve_device(self.cfg.device)
         state = run.load_checkpoint(best=True, map_location=device)
         if state is None:
-            raise CheckpointError(f"run {run.path} has no checkpoints/best.pt to evaluate")
+            raise CheckpointError(f"run {run.path} has no checkpoints/best.pt to evaluate (an archived run keeps its "
+                                  "records only): evaluate the original run directory, or train the run again")
         env = self.make_env("train", 1, 0)
         try:
             policy = make_policy(self.cfg, env).to(device)

@@ -19,7 +19,12 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp  
 
 from torchrl_causal.evaluation.metrics import Policy  # noqa: E402
 
-__all__ = ["EpisodeOutcome", "Filmstrip", "record_filmstrip", "rendered_episode", "save_filmstrips"]
+__all__ = ["EpisodeOutcome", "Filmstrip", "RenderingUnavailable", "record_filmstrip", "rendered_episode",
+           "save_filmstrips"]
+
+
+class RenderingUnavailable(TypeError):
+    """The env draws no frames (it is not a MuJoCo scene)."""
 
 
 @dataclass(frozen=True)
@@ -35,7 +40,8 @@ class Filmstrip:
 def _renderable(env: EnvBase) -> EnvBase:
     base = env.base_env if isinstance(env, TransformedEnv) else env
     if not callable(getattr(base, "render", None)):
-        raise TypeError(f"{type(base).__name__} cannot render frames (no render method): use a MuJoCo maze env")
+        raise RenderingUnavailable(f"{type(base).__name__} cannot render frames (no render method): filmstrips need a "
+                                   "run on a MuJoCo maze env (antmaze_*, humanoidmaze_*)")
     return base
 
 

@@ -112,7 +112,7 @@ def load_run(run_dir: str | Path) -> RunRecord:
     for path in (run.eval_path(regime) for regime in ("train", "deploy")):
         if not path.is_file():
             continue
-        data = json.loads(path.read_text())
+        data = run.read_json(path)
         evaluations[data["regime"]] = EvaluationResult.from_dict(data)
         maze = data.get("maze", maze)
     curve_file = run.train_curve_file

@@ -22,7 +22,7 @@ from torchrl.data import Binary, Bounded, Composite, TensorSpec
 from torchrl.envs import EnvBase, Transform, TransformedEnv
 
 from torchrl_causal.graphs.window import AdjustmentWindow
-from torchrl_causal.experiment.schema import WindowMode
+from torchrl_causal.experiment.schema import ConfigValueError, WindowMode
 from torchrl_causal.transforms import CausalWindowTransform
 
 __all__ = [
@@ -104,7 +104,10 @@ def make_window(cfg: DictConfig) -> AdjustmentWindow:
     try:
         window = CausalWindowTransform.from_env(env, cfg.window.k, causal=cfg.causal, mode=WindowMode(cfg.window.mode).value,
                                                 window_matched=cfg.window.window_matched).window
-        return window.without(cfg.window.drop)
+        try:
+            return window.without(cfg.window.drop)
+        except ValueError as error:
+            raise ConfigValueError(f"window.drop={list(cfg.window.drop)}: {error}") from None
     finally:
         env.close()
 
@@ -157,6 +160,7 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
     found it, so a run that collects the set trains exactly as one that loads it.
     """
     from torchrl_causal.data import collect_demonstrations, successful_episodes
+    from torchrl_causal.data.demonstrations import DatasetError
     from torchrl_causal.data.sources import load_source, minari_reference
 
     path = Path(cfg.demos.path)
@@ -176,7 +180,11 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
             # Another run finished collecting the same set first (rename onto its folder failed).
         finally:
             env.close()
-    demonstrations = load_source(cfg.demos.source, path, expected=reference)
+    try:
+        demonstrations = load_source(cfg.demos.source, path, expected=reference)
+    except DatasetError as error:
+        raise DatasetError(f"{error}. Delete {path} and rerun to collect the set again (demos.seed "
+                           f"{cfg.demos.seed}), or point demos.path at a good copy") from None
     if not cfg.demos.successful_only:
         return demonstrations
     kept = successful_episodes(demonstrations)

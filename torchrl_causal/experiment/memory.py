@@ -193,9 +193,13 @@ def free_disk(path: str | os.PathLike) -> int:
     return shutil.disk_usage(folder).free
 
 
+def _size(count: int) -> str:
+    return f"{count / GB:.1f} GB" if count >= GB // 10 else f"{count / (1 << 20):.1f} MB"
+
+
 def _largest(items: dict[str, int], count: int = 3) -> str:
     biggest = sorted(items.items(), key=lambda item: -item[1])[:count]
-    return ", ".join(f"{name} {value / GB:.1f} GB" for name, value in biggest)
+    return ", ".join(f"{name} {_size(value)}" for name, value in biggest)
 
 
 def check_footprint(footprint: Footprint, *, available_ram: int, free_disk: int) -> None:
@@ -207,13 +211,13 @@ def check_footprint(footprint: Footprint, *, available_ram: int, free_disk: int)
     """
     if footprint.ram_bytes > available_ram:
         raise ConfigValueError(
-            f"this run needs an estimated {footprint.ram_bytes / GB:.1f} GB of memory ({_largest(footprint.ram)}) "
-            f"and {available_ram / GB:.1f} GB are available: lower the keys named (a smaller window.k, fewer "
+            f"this run needs an estimated {_size(footprint.ram_bytes)} of memory ({_largest(footprint.ram)}) "
+            f"and {_size(available_ram)} are available: lower the keys named (a smaller window.k, fewer "
             "demos.episodes or envs), or raise max_memory_gb if this machine has more to give")
     if footprint.disk_bytes > free_disk:
         raise ConfigValueError(
-            f"this run needs an estimated {footprint.disk_bytes / GB:.1f} GB of disk ({_largest(footprint.disk)}) "
-            f"and the run root's file system has {free_disk / GB:.1f} GB free: lower the keys named, or choose "
+            f"this run needs an estimated {_size(footprint.disk_bytes)} of disk ({_largest(footprint.disk)}) "
+            f"and the run root's file system has {_size(free_disk)} free: lower the keys named, or choose "
             "another run_root")
 
 

@@ -59,6 +59,7 @@ __all__ = [
     "RUNTIME_KEYS",
     "CheckpointError",
     "ConfigMismatchError",
+    "RunFileError",
     "RunDirectory",
     "RunInUseError",
     "atomic_save",
@@ -90,6 +91,15 @@ RUNTIME_KEYS: tuple[str, ...] = (
 
 class CheckpointError(TorchRLCausalError, RuntimeError):
     """A checkpoint that cannot be read or does not belong to this run."""
+
+
+class RunFileError(TorchRLCausalError, ValueError):
+    """A file of a run directory that does not parse (truncated, edited, or not the run's)."""
+
+
+def _first_line(error: BaseException, limit: int = 100) -> str:
+    text = " ".join(str(error).split()) or type(error).__name__
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 class ConfigMismatchError(TorchRLCausalError, ValueError):
@@ -140,15 +150,25 @@ def atomic_save(obj: Any, path: Path) -> None:
     os.replace(tmp, path)
 
 
+def _checkpoint_remedy(path: Path) -> str:
+    if path.name == "best.pt":
+        return ("nothing was changed; it is the run's selected policy, which only training selects again: train the "
+                "run again with its command and resume=false")
+    return ("nothing was changed; delete it and rerun the run's command with resume=false to train it again from "
+            "the start (best.pt holds the selected policy only, which cannot resume training)")
+
+
 def load_checkpoint(path: Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
     """``torch.load(..., weights_only=True)`` onto ``map_location``, with an error that
     names the file. A checkpoint written on a GPU loads on a machine without one."""
     try:
         state = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as err:  # pickle, zip and unpickler errors all mean the same here
-        raise CheckpointError(f"checkpoint {path} is corrupted or not a torchrl-causal checkpoint: {err}") from err
+        raise CheckpointError(f"checkpoint {path} is corrupted or not a torchrl-causal checkpoint "
+                              f"({type(err).__name__}): {_checkpoint_remedy(path)}") from err
     if not isinstance(state, dict) or "progress" not in state:
-        raise CheckpointError(f"checkpoint {path} lacks the 'progress' entry of a torchrl-causal checkpoint")
+        raise CheckpointError(f"checkpoint {path} lacks the 'progress' entry of a torchrl-causal checkpoint: "
+                              f"{_checkpoint_remedy(path)}")
     return state
 
 
@@ -197,6 +217,14 @@ def changed_keys(old: Mapping[str, Any], new: Mapping[str, Any], ignored: Iterab
 
     pairs = {key: (before.get(key, absent), after.get(key, absent)) for key in sorted(set(before) | set(after))}
     return {key: pair for key, pair in pairs.items() if not same(*pair)}
+
+
+def _json_remedy(path: Path) -> str:
+    if path.name == STATUS_FILE:
+        return "delete it and rerun the run's command: it resumes from its last checkpoint"
+    if path.name == WINDOW_FILE:
+        return "delete it and rerun the run's command (resume=true rewrites it), or restore it from an archive"
+    return "delete it and rerun the command that wrote it (evaluate, or the run's own command), or restore it from an archive"
 
 
 class RunDirectory:
@@ -271,9 +299,22 @@ class RunDirectory:
     # ------------------------------------------------------------------ config
 
     def read_config(self) -> DictConfig:
+        """``config.yaml``.
+
+        Raises:
+            FileNotFoundError: the directory holds no run.
+            RunFileError: ``config.yaml`` does not parse.
+        """
         if not self.config_file.is_file():
             raise FileNotFoundError(f"{self.path} is not a run directory: {CONFIG_FILE} is missing")
-        return OmegaConf.load(self.config_file)
+        try:
+            config = OmegaConf.load(self.config_file)
+        except Exception as error:  # YAML scanner and parser errors, OmegaConf's own
+            raise RunFileError(f"{self.config_file} is corrupted ({_first_line(error)}): restore it (an archive "
+                               "under results/runs keeps a copy) or train the run again") from None
+        if not isinstance(config, DictConfig):
+            raise RunFileError(f"{self.config_file} is corrupted (not a mapping): restore it or train the run again")
+        return config
 
     def claim(self, cfg: DictConfig, ignored: Iterable[str] = ()) -> None:
         """Makes this directory the run of ``cfg``, refusing another run's directory.
@@ -391,7 +432,7 @@ class RunDirectory:
             ...     print(run.read_status()["status"])
             running
         """
-        status = json.loads(self.status_file.read_text()) if self.status_file.is_file() else {}
+        status = self.read_json(self.status_file) if self.status_file.is_file() else {}
         if status.get("status") == "running" and not self.is_held():
             status["status"] = "killed"
         return status
@@ -432,7 +473,18 @@ class RunDirectory:
         atomic_write_text(path, json.dumps(record))
 
     def read_json(self, path: Path) -> dict[str, Any]:
-        return json.loads(path.read_text())
+        """A JSON record of the run (``status.json``, ``window.json``, ``eval/*.json``...).
+
+        Raises:
+            RunFileError: naming the file, when it does not parse or is not an object.
+        """
+        try:
+            record = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as error:
+            raise RunFileError(f"{path} is corrupted ({_first_line(error)}): {_json_remedy(path)}") from None
+        if not isinstance(record, dict):
+            raise RunFileError(f"{path} is corrupted (not a JSON object): {_json_remedy(path)}")
+        return record
 
     # ------------------------------------------------------------------ checkpoints
 
