@@ -27,6 +27,7 @@ from torchrl_causal.evaluation import (
     write_report,
 )
 from torchrl_causal.cli.archive import main as archive_main
+from torchrl_causal.evaluation.reporting import NOTES_BEGIN, NOTES_END
 from torchrl_causal.evaluation.runs import archive_runs, eval_path
 from torchrl_causal.evaluation.tables import EffectTargets, seed_effect_checks, seed_spread, seeds_markdown
 from torchrl_causal.cli.report import main as report_main
@@ -218,9 +219,15 @@ def test_notes_survive_regeneration_and_cli(paper_runs: Path, tmp_path: Path, ca
     out = tmp_path / "out"
     report_main([f"runs={paper_runs}", f"out={out}", "name=t"])
     md = out / "t.md"
-    md.write_text(md.read_text() + "\n<!-- notes: kept when the report is regenerated -->\nWhy X.\n<!-- /notes -->\n")
+    empty = f"{NOTES_BEGIN}\n{NOTES_END}"
+    assert md.read_text().count(empty) == 1  # every report has the place for notes
+    md.write_text(md.read_text().replace(empty, f"{NOTES_BEGIN}\nWhy X.\n{NOTES_END}"))
     report_main([f"runs={paper_runs}", f"out={out}", "name=t"])
-    assert "Why X." in md.read_text()
+    assert md.read_text().count("Why X.") == 1
+    md.write_text(md.read_text().replace(NOTES_BEGIN, "").replace(NOTES_END, ""))  # markers lost by hand
+    with pytest.raises(SystemExit, match="has no notes markers"):
+        report_main([f"runs={paper_runs}", f"out={out}", "name=t"])
+    assert "Why X." in md.read_text()  # refused, not overwritten
     assert "Norm. E[Y]" in capsys.readouterr().out
     with pytest.raises(SystemExit, match="unknown argument"):
         report_main([f"runs={paper_runs}", "colour=red"])

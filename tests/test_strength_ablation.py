@@ -94,7 +94,9 @@ def test_an_archive_gives_back_the_stored_records_without_the_checkpoints(runs_r
 def test_notes_written_by_hand_survive_a_rerun(runs_root: Path, tmp_path: Path) -> None:
     args = [f"runs={runs_root}", "strengths=[0,1]", f"episodes={EPISODES}", f"out={tmp_path}", "name=ablation"]
     path = ablation.main(args)
-    path.write_text(path.read_text() + f"\n{NOTES_BEGIN}\nWhy BC falls.\n{NOTES_END}\n")
+    empty = f"{NOTES_BEGIN}\n{NOTES_END}"
+    assert path.read_text().count(empty) == 1  # the place for notes, in every file written
+    path.write_text(path.read_text().replace(empty, f"{NOTES_BEGIN}\nWhy BC falls.\n{NOTES_END}"))
     text = ablation.main(args).read_text()
     assert text.count("Why BC falls.") == 1 and "| C-BC | 0 |" in text
     assert text.index("Why BC falls.") < text.index("| Algorithm |")

@@ -24,17 +24,16 @@ finished runs instead of training them again and resumes interrupted ones;
 from __future__ import annotations
 
 import logging
-import multiprocessing
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from torchrl_causal.evaluation import aggregate, effect_checks, load_runs, write_report
 from torchrl_causal.evaluation.tables import effect_markdown, lengths_markdown, raw_markdown, table1_markdown
-from torchrl_causal.lifecycle import run
 from torchrl_causal.experiment import RunInterrupted, compose_config
+from torchrl_causal.experiment.interrupts import run_in_processes, signals_raise
+from torchrl_causal.lifecycle import run
 
 __all__ = ["main", "demo_overrides", "DEMO_SETTINGS", "DEMO_ALGOS", "DEMO_RUNS"]
 
@@ -68,17 +67,20 @@ def demo_overrides(algo: str, causal: bool, run_root: str | Path) -> list[str]:
 def _run_one(overrides: list[str]) -> int:
     """Trains and evaluates one run; the exit status a signal asks for, 0 when it finished.
 
-    Runs in a worker process: a :class:`RunInterrupted` is turned into its exit status here
-    because the exception does not survive pickling back to the parent.
+    Runs in a worker process (:func:`~torchrl_causal.experiment.interrupts.run_in_processes`,
+    whose workers raise :class:`RunInterrupted` on a signal from their start) or, for the
+    expert, in the demo's own process under :func:`signals_raise`: the interruption becomes
+    an exit status here, since the exception does not survive pickling back to the parent.
     """
-    cfg = compose_config(overrides)
-    label = Path(cfg.run_dir).parent.name  # runs interleave two at a time: tag each line
-    logging.basicConfig(level=logging.INFO, format=f"{label:>6} | %(message)s", stream=sys.stdout, force=True)
-    print(f"=== {label}: {cfg.run_dir} ===", flush=True)
+    label = "demo"
     try:
+        cfg = compose_config(overrides)
+        label = Path(cfg.run_dir).parent.name  # runs interleave two at a time: tag each line
+        logging.basicConfig(level=logging.INFO, format=f"{label:>6} | %(message)s", stream=sys.stdout, force=True)
+        print(f"=== {label}: {cfg.run_dir} ===", flush=True)
         run(cfg)
     except RunInterrupted as stop:
-        print(f"{cfg.run_dir}: {stop}", file=sys.stderr, flush=True)
+        print(f"{label:>6} | {stop}", flush=True)
         return stop.exit_code
     return 0
 
@@ -87,19 +89,37 @@ def _workers() -> int:
     return max(1, int(os.environ.get("DEMO_WORKERS", min(2, os.cpu_count() or 1))))
 
 
+def _stop(exit_codes: list[int | None]) -> None:
+    """Ends the demo after an interrupted or failed run, with the line that says what to do."""
+    codes = [code for code in exit_codes if code]
+    if any(code > 128 for code in codes):
+        print("Interrupted: what was done is saved. Resume with: make demo", file=sys.stderr)
+    else:
+        print(f"A run failed (exit status {max(codes)}; its error is above). Fix it, then resume with: make demo",
+              file=sys.stderr)
+    raise SystemExit(max(codes))
+
+
 def main() -> None:
+    try:
+        _demo()
+    except KeyboardInterrupt:  # outside the runs: reading them back, writing the report
+        print("Interrupted: what was done is saved. Resume with: make demo", file=sys.stderr)
+        raise SystemExit(130) from None
+
+
+def _demo() -> None:
     start = time.monotonic()
     root = Path(os.environ.get("DEMO_RUN_ROOT", "runs/demo"))
     print(__doc__.split("\n\n")[0])
     (expert, *learners) = [demo_overrides(algo, causal, root) for algo, causal in DEMO_RUNS]
-    exit_codes = [_run_one(expert)]
+    with signals_raise():
+        exit_codes: list[int | None] = [_run_one(expert)]
     if not any(exit_codes):
-        # spawn: a fresh interpreter per worker, no forked torch or signal state
-        with ProcessPoolExecutor(_workers(), mp_context=multiprocessing.get_context("spawn")) as pool:
-            exit_codes += list(pool.map(_run_one, learners))
+        # fresh (spawned) interpreters, two at a time; a signal starts no new run
+        exit_codes += run_in_processes(_run_one, learners, _workers())
     if any(exit_codes):
-        print("Interrupted: what was done is saved. Resume with: make demo", file=sys.stderr)
-        raise SystemExit(max(exit_codes))
+        _stop(exit_codes)
     for setting, table in sorted(aggregate(load_runs(root)).items()):
         print(f"\n## {setting.describe()}\n")
         print("Deploy regime (Table 1 layout; normalised E[Y] shifts the worst algorithm to 0):\n")
