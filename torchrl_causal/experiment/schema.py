@@ -29,7 +29,6 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import enum
-import importlib
 import math
 import typing
 from dataclasses import dataclass, field
@@ -525,28 +524,6 @@ def _check_sizes(cfg: DictConfig) -> None:
                                "at most horizon - 1 steps back (each lag adds a copy of the state to every observation)")
 
 
-#: The package each TorchRL logger imports when it starts, and the extra that installs it.
-LOGGER_PACKAGES: dict[str, tuple[str, str]] = {
-    "torchrl.record.loggers.TensorboardLogger": ("tensorboard", "tensorboard"),
-    "torchrl.record.loggers.tensorboard.TensorboardLogger": ("tensorboard", "tensorboard"),
-    "torchrl.record.loggers.WandbLogger": ("wandb", "wandb"),
-    "torchrl.record.loggers.wandb.WandbLogger": ("wandb", "wandb"),
-}
-
-
-def _check_logger(cfg: DictConfig) -> None:
-    """A logger whose package is missing fails when training starts, after the run
-    directory exists: refused here instead."""
-    package, extra = LOGGER_PACKAGES.get(str(OmegaConf.select(cfg, "logger._target_")), (None, None))
-    if package is None:
-        return
-    try:
-        importlib.import_module(package)
-    except ImportError:
-        raise ConfigValueError(f"logger {cfg.logger._target_} needs the {package} package, which is not installed: "
-                               f"pip install 'torchrl-causal[{extra}]', or use logger=csv") from None
-
-
 def _check_expert(cfg: DictConfig) -> None:
     if cfg.env.expert is None:
         raise ConfigValueError(
@@ -635,6 +612,5 @@ def validate_config(cfg: DictConfig) -> None:
     _check_device(cfg)
     _check_algorithm(cfg)
     _check_target_entropy(cfg)
-    _check_logger(cfg)
     _check_expert(cfg)
     _check_extras(cfg)
