@@ -197,11 +197,17 @@ def check_demonstrations(cfg: DictConfig) -> None:
     """Refuses the demonstrations of ``cfg.demos`` before a run starts (see
     :func:`~torchrl_causal.data.sources.check_source`): a wrong env, a missing key,
     corrupted data. A set still to be collected passes."""
-    from torchrl_causal.data.sources import check_source
+    from torchrl_causal.data.demonstrations import DatasetError
+    from torchrl_causal.data.sources import check_source, minari_reference
 
     env = make_env(cfg, "train", 1, cfg.demos.seed)
     try:
         check_source(cfg.demos.source, cfg.demos.path, env)
+    except DatasetError as error:
+        if minari_reference(cfg.demos.source) is not None:
+            raise
+        raise DatasetError(f"{error}. Delete {cfg.demos.path} and rerun to collect the set again (demos.seed "
+                           f"{cfg.demos.seed}), or point demos.path at a good copy") from None
     finally:
         env.close()
 
