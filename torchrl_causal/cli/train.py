@@ -23,7 +23,7 @@ from omegaconf import DictConfig
 
 from torchrl_causal.cli.arguments import one_line_errors
 from torchrl_causal.experiment.config import CONFIG_NAME, CONFIG_PATH
-from torchrl_causal.experiment.interrupts import RunInterrupted, signals_raise
+from torchrl_causal.experiment.interrupts import RunInterrupted
 from torchrl_causal.experiment.run_directory import CheckpointError, RunInUseError
 from torchrl_causal.lifecycle import run
 
@@ -34,8 +34,8 @@ __all__ = ["entry_point", "main"]
 def main(cfg: DictConfig) -> float:
     """Runs one job; returns its deploy-regime success rate (what a sweeper would optimise)."""
     try:
-        # a signal before the run's own handlers (composing, checking, building the window) stops as cleanly
-        with signals_raise(), one_line_errors(CheckpointError, RunInUseError):
+        # (a Ctrl-C before the run's own handlers, while checking or building the window, is entry_point's)
+        with one_line_errors(CheckpointError, RunInUseError):
             results = run(cfg)
     except RunInterrupted as stop:
         command = " ".join(["python -m torchrl_causal.train", *HydraConfig.get().overrides.task])
