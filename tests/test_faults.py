@@ -207,8 +207,8 @@ def _without_tensorboard() -> None:
 
 def _cases(trained: Path) -> list[Case]:
     run = _copy_of(trained)
-    fresh = [f"run_root={{root}}/runs", *TINY_BC]
-    rerun = [f"run_root={{root}}", *TINY_BC]
+    fresh = ["run_root={root}/runs", *TINY_BC]
+    rerun = ["run_root={root}", *TINY_BC]
     T, E, R, S = "torchrl_causal.train", "torchrl_causal.evaluate", "torchrl_causal.report", "torchrl_causal.status"
     A, F, X = "torchrl_causal.strength_ablation", "torchrl_causal.filmstrip", "torchrl_causal.archive"
     in_run = f"{{root}}/{RUN}"
@@ -218,7 +218,7 @@ def _cases(trained: Path) -> list[Case]:
         Case("train +typo key", T, [*fresh, "+windw.k=2"], "config key windw.k is unknown"),
         Case("train typo key", T, [*fresh, "windw.k=2"], "windw"),
         Case("train seed not a number", T, [*fresh, "seed=abc"], "seed=abc"),
-        Case("train budget inside warm-up", T, [f"run_root={{root}}/runs", "env=rovermaze_u", "algo=sqil",
+        Case("train budget inside warm-up", T, ["run_root={root}/runs", "env=rovermaze_u", "algo=sqil",
                                                 "algo.total_steps=100", "algo.random_steps=512"],
              "algo.total_steps=100 must be > algo.random_steps=512"),
         Case("train drop unknown variable", T, [*fresh, "window.drop=[Q]"], "window.drop"),

@@ -10,7 +10,6 @@ every run below a folder that has at least one final evaluation; records that
 from __future__ import annotations
 
 import csv
-import json
 import logging
 import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence

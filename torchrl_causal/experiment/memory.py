@@ -33,7 +33,6 @@ import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
-import torch
 from omegaconf import DictConfig, OmegaConf
 from torchrl.data import Composite, TensorSpec
 
