@@ -1,6 +1,6 @@
 """Reading finished runs back for reports.
 
-A run directory's layout is :class:`~torchrl_causal.trainers.RunDirectory`'s (config,
+A run directory's layout is :class:`~torchrl_causal.experiment.RunDirectory`'s (config,
 window, status, checkpoints, scalar logs, ``eval/train.json`` and ``eval/deploy.json``,
 the final evaluation of the selected policy in each regime). :func:`load_runs` finds
 every run below a folder that has at least one final evaluation; records that
@@ -208,7 +208,7 @@ def archive_runs(root: str | Path, out: str | Path, *, policies: bool = False) -
     """Copies the record of every complete run below ``root`` to the same relative path
     below ``out`` and returns the archived run directories.
 
-    A record (:meth:`~torchrl_causal.trainers.RunDirectory.record_files`: config, window,
+    A record (:meth:`~torchrl_causal.experiment.RunDirectory.record_files`: config, window,
     status, evaluation records, the periodic evaluations' curves) is what :func:`load_runs`, the report and
     the strength ablation's stored evaluations read back; at well under a megabyte per
     run it can be committed, so that a report is regenerated where the runs themselves
