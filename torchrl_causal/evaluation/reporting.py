@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace  # noqa: F401  (the docstring examples use it)
 from pathlib import Path
 from typing import Any
 
