@@ -159,8 +159,9 @@ def _actor_and_loss(**kwargs):
     return actor, loss
 
 
-def test_behaviour_cloning_anchor_is_td3_bc_on_the_expert_rows() -> None:
-    actor, loss = _actor_and_loss(bc_weight=0.4)
+@pytest.mark.parametrize("bc_scale", ["expert_value", "actor_loss"])
+def test_behaviour_cloning_anchor_is_td3_bc_on_the_expert_rows(bc_scale: str) -> None:
+    actor, loss = _actor_and_loss(bc_weight=0.4, bc_scale=bc_scale)
     batch = _batch()
     out = loss(batch.clone())
     with torch.no_grad():
@@ -168,12 +169,37 @@ def test_behaviour_cloning_anchor_is_td3_bc_on_the_expert_rows() -> None:
     mode = torch.tanh(loc)  # the deterministic action of a tanh-Gaussian on [-1, 1]
     expert = batch["expert"].squeeze(-1)
     mse = (mode[expert] - batch["action"][expert].clamp(-1 + 2e-3, 1 - 2e-3)).pow(2).mean()
-    torch.testing.assert_close(out["loss_bc"], 0.4 * out["loss_actor"].detach().abs() * mse, rtol=1e-5, atol=1e-7)
+    # expert_value: SQIL's r_E / (1 - gamma) = 1 / 0.01, whatever the critics say
+    scale = 100.0 if bc_scale == "expert_value" else out["loss_actor"].detach().abs()
+    torch.testing.assert_close(out["loss_bc"], 0.4 * scale * mse, rtol=1e-5, atol=1e-6)
     out["loss_bc"].backward()
     assert loss.log_alpha.grad is None
     assert all(p.grad is None for p in loss.qvalue_network_params.values(True, True))
     assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in loss.actor_network_params.values(True, True))
     assert "loss_bc" not in _actor_and_loss()[1](batch.clone()).keys()
+
+
+def test_the_expert_value_scale_keeps_the_anchor_when_the_critics_value_is_near_zero() -> None:
+    # The failure of the |loss_actor| scale: with critics whose values at the actor's actions
+    # cancel its entropy term, the actor loss is ~0 and that anchor vanishes; this one does not.
+    actor, loss = _actor_and_loss(bc_weight=0.4, bc_scale="actor_loss")
+    _, constant = _actor_and_loss(bc_weight=0.4)
+    batch = _batch()
+    for module in (loss, constant):
+        for param in module.qvalue_network_params.values(True, True):
+            param.data.zero_()  # Q = 0 everywhere ...
+        module.log_alpha.data.fill_(-20.0)  # ... and alpha ~ 0 (clamped to 1e-3): loss_actor ~ 0
+    assert abs(loss(batch.clone())["loss_actor"].item()) < 0.05
+    anchor = constant.behaviour_cloning_anchor(batch).item()
+    assert loss(batch.clone())["loss_bc"].item() < 0.05 * 0.4 * anchor
+    torch.testing.assert_close(constant(batch.clone())["loss_bc"].item(), 0.4 * 100.0 * anchor, rtol=1e-5, atol=0)
+
+
+def test_an_unknown_bc_scale_is_refused() -> None:
+    spec = Bounded(-1.0, 1.0, shape=(2,))
+    with pytest.raises(ValueError, match="bc_scale must be one of"):
+        SQILLoss(make_tanh_gaussian_actor(3, spec, hidden=8, num_blocks=1),
+                 make_qvalue_network(3, spec, hidden=8, num_blocks=1), bc_weight=0.4, bc_scale="mean_q")
 
 
 def test_behaviour_cloning_nll_is_the_tanh_gaussian_density_of_the_expert_actions() -> None:

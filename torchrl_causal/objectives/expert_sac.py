@@ -23,7 +23,7 @@ from torchrl.objectives import SACLoss
 from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingIndicator
 from torchrl_causal.objectives.utils import eval_mode
 
-__all__ = ["ALPHA_CLAMP", "GOAL_VALUES", "ExpertFlaggedSACLoss"]
+__all__ = ["ALPHA_CLAMP", "BC_SCALES", "GOAL_VALUES", "ExpertFlaggedSACLoss"]
 
 #: The paper's clamp on the entropy coefficient, ``[exp(-log 1000), exp(-log 10)]``.
 ALPHA_CLAMP: tuple[float, float] = (1e-3, 1e-1)
@@ -31,6 +31,11 @@ ALPHA_CLAMP: tuple[float, float] = (1e-3, 1e-1)
 #: What a goal-terminated transition bootstraps from: ``None`` (zero, the paper's
 #: objective) or ``"expert"`` (the value of an expert state held for ever).
 GOAL_VALUES: tuple[str | None, ...] = (None, "expert")
+
+#: What the behaviour-cloning anchor's weight is multiplied by: ``"expert_value"`` (the
+#: critic's scale, a constant) or ``"actor_loss"`` (``|loss_actor|``, the first version,
+#: kept to reproduce the results made with it; it vanishes when the actor loss crosses zero).
+BC_SCALES: tuple[str, ...] = ("expert_value", "actor_loss")
 
 #: Expert actions are clipped this far inside the action bounds before their
 #: log-likelihood is taken: a tanh-Gaussian gives the bounds themselves density zero.
@@ -79,9 +84,18 @@ class ExpertFlaggedSACLoss(SACLoss):
             no rows, no action and no entropy bonus in the goal.
         bc_weight (float, optional): ``None`` (default) or ``w > 0``: adds ``"loss_bc"``,
             a behaviour-cloning anchor on the expert rows (TD3+BC's, Fujimoto & Gu 2021):
-            ``w * |loss_actor| * mean((mode(pi(z)) - x_E)^2)``. Scaling by the actor
-            loss's magnitude (about the mean ``Q``) keeps the anchor's weight relative to
-            the critic's pull whatever the reward scale.
+            ``w * scale * mean((mode(pi(z)) - x_E)^2)``, ``scale`` set by ``bc_scale``.
+        bc_scale (str, optional): the anchor's scale. ``"expert_value"`` (default):
+            :attr:`expert_value`, the critic's scale under imitation labels, so the
+            anchor's weight relative to the critic's pull does not depend on the reward
+            scale, as TD3+BC's ``mean |Q|`` normaliser intends, but stays constant.
+            ``"actor_loss"``: ``|loss_actor|``, the batch's ``|mean(alpha log pi - Q)|``.
+            That one fails just after a warm start: the critic's values at a narrow cloned
+            actor's actions start near zero (its ``-alpha log pi`` is a penalty), so the
+            actor loss crosses zero and the anchor vanishes exactly when the actor starts to
+            move (measured on AntMaze-Medium: 500 updates move the cloned actor's actions by
+            0.68 RMS and its success from 40% to 0%; with ``"expert_value"`` by 0.16, 55%).
+            Kept to reproduce the results made with it.
         **kwargs: forwarded to :class:`~torchrl.objectives.SACLoss`.
     """
 
@@ -111,6 +125,7 @@ class ExpertFlaggedSACLoss(SACLoss):
         absorbing: bool = False,
         goal_value: Literal["expert"] | None = None,
         bc_weight: float | None = None,
+        bc_scale: Literal["expert_value", "actor_loss"] = "expert_value",
         **kwargs,
     ) -> None:
         if not 0.0 < min_alpha <= max_alpha:
@@ -121,6 +136,8 @@ class ExpertFlaggedSACLoss(SACLoss):
             raise ValueError("goal_value and absorbing are two answers to the same bias: choose one.")
         if bc_weight is not None and not bc_weight > 0:
             raise ValueError(f"bc_weight must be None (off) or positive, got {bc_weight!r}.")
+        if bc_scale not in BC_SCALES:
+            raise ValueError(f"bc_scale must be one of {BC_SCALES}, got {bc_scale!r}.")
         if absorbing:
             qvalue_network = AbsorbingIndicator(qvalue_network)
         super().__init__(
@@ -137,6 +154,7 @@ class ExpertFlaggedSACLoss(SACLoss):
             raise ValueError("bc_weight needs a reduced loss (reduction='mean' or 'sum'), got reduction='none'.")
         self.goal_value = goal_value
         self.bc_weight = bc_weight
+        self.bc_scale = bc_scale
 
     #: The per-step reward of an expert transition in the critic's target (SQIL's label;
     #: subclasses whose critic reward is implicit say what it is).
@@ -196,7 +214,8 @@ class ExpertFlaggedSACLoss(SACLoss):
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         out = super().forward(tensordict)
         if self.bc_weight is not None:
-            out.set("loss_bc", self.bc_weight * out["loss_actor"].detach().abs() * self.behaviour_cloning_anchor(tensordict))
+            scale = self.expert_value if self.bc_scale == "expert_value" else out["loss_actor"].detach().abs()
+            out.set("loss_bc", self.bc_weight * scale * self.behaviour_cloning_anchor(tensordict))
         return out
 
     @property
