@@ -196,7 +196,9 @@ def test_no_module_imports_another_modules_private_names(path: Path) -> None:
 
 def _private_reads(source: str) -> list[str]:
     """The private attributes ``source`` reads (``x._name``) without defining them itself
-    (as a function, class, or by assigning ``something._name``)."""
+    (as a function, class, or by assigning ``something._name``), and the private methods it
+    reaches through ``super()`` that no two of its classes define (an override chaining to
+    a base defined elsewhere: reading that base's private name)."""
     tree = ast.parse(source)
     own = set()
     for node in ast.walk(tree):
@@ -204,16 +206,42 @@ def _private_reads(source: str) -> list[str]:
             own.add(node.name)
         elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
             own.add(node.attr)
+    methods = [stmt.name for cls in ast.walk(tree) if isinstance(cls, ast.ClassDef)
+               for stmt in cls.body if isinstance(stmt, (ast.FunctionDef, ast.AsyncFunctionDef))]
     return [
         ast.unparse(node)
         for node in ast.walk(tree)
-        if isinstance(node, ast.Attribute) and PRIVATE.match(node.attr) and node.attr not in own
+        if isinstance(node, ast.Attribute) and PRIVATE.match(node.attr)
+        and (node.attr not in own or (_is_super(node.value) and methods.count(node.attr) < 2))
     ]
+
+
+def _is_super(node: ast.expr) -> bool:
+    return isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "super"
 
 
 def test_private_reads_are_found() -> None:
     source = "class D:\n    def __init__(self):\n        self._pa = []\n\ndef f(g, v):\n    return g._pa, v._rank\n"
     assert _private_reads(source) == ["v._rank"]
+    override = "class L(Loss):\n    def _hook(self):\n        return super()._hook()\n"
+    assert _private_reads(override) == ["super()._hook"]
+    local_base = "class B:\n    def _hook(self):\n        pass\n\nclass C(B):\n    def _hook(self):\n        super()._hook()\n"
+    assert _private_reads(local_base) == []
+
+
+#: Underscored names that are public API: a named tuple's methods (underscored so as not
+#: to clash with its fields) and Hydra's instantiation key.
+PUBLIC_UNDERSCORED = {"_asdict", "_replace", "_target_"}
+
+
+@pytest.mark.parametrize("path", [path for path in SOURCES if path.name != "compat.py"],
+                         ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_private_names_of_libraries_and_other_modules_are_read_only_in_compat(path: Path) -> None:
+    """TorchRL's (tensordict's, torch's, OmegaConf's) private names are read, and its
+    private hooks overridden, only in ``compat.py``, which gives each a public name; no
+    module reads a private name of another of the package's modules."""
+    reads = [read for read in _private_reads(path.read_text()) if read.rsplit(".", 1)[-1] not in PUBLIC_UNDERSCORED]
+    assert not reads, f"{reads}: wrap the library's private name in torchrl_causal/compat.py, or make ours public"
 
 
 @pytest.mark.parametrize("path", sorted((PACKAGE / "graphs").glob("*.py")), ids=lambda p: p.name)

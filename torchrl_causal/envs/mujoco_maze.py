@@ -473,7 +473,7 @@ class MujocoMazeEnv(GustConfoundedEnv):
             self._read_state(data, row)
         x, y = self.variable_columns["P"].start, self.variable_columns["P"].start + 1
         distance = np.hypot(state[:, x] - self._goal_xy[0], state[:, y] - self._goal_xy[1])
-        distance = torch.from_numpy(distance.astype(np.float32)).to(self.device).reshape(self._success.shape)
+        distance = torch.from_numpy(distance.astype(np.float32)).to(self.device).reshape(*self.batch_size, 1)
         success = distance <= self.success_radius
         # The reward of step t pays for the gust U_t that blew during it.
         return self.maze_reward(success, distance), success

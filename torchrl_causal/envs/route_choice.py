@@ -147,7 +147,7 @@ class RouteChoiceEnv(ConfoundedEnv):
         return self._binary_spec(), variables
 
     def _draw(self, probability: Fraction) -> torch.Tensor:
-        uniform = torch.rand(self._success.shape, generator=self.rng, device=self.device)
+        uniform = torch.rand((*self.batch_size, 1), generator=self.rng, device=self.device)
         return (uniform < float(probability)).to(torch.float32)
 
     def _reset_state(self, mask: torch.Tensor) -> None:

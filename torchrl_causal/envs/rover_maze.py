@@ -228,7 +228,7 @@ class RoverMazeEnv(GustConfoundedEnv):
         return Bounded(-1.0, 1.0, shape=(*batch, 2), device=self.device), variables
 
     def _reset_state(self, mask: torch.Tensor) -> None:
-        shape = self._success.shape
+        shape = (*self.batch_size, 1)
         jitter = (2 * torch.rand((*shape[:-1], 2), generator=self.rng, device=self.device) - 1) * self.params.start_jitter
         position = self.start_position + jitter
         heading = (2 * torch.rand(shape, generator=self.rng, device=self.device) - 1) * math.pi

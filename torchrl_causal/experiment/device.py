@@ -20,6 +20,8 @@ from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
+from torchrl_causal.compat import dynamo_supported
+
 __all__ = ["DeviceCheck", "PolicyOnDevice", "compile_unavailable", "for_cpu_env", "resolve_device"]
 
 CPU = torch.device("cpu")
@@ -48,7 +50,7 @@ def compile_unavailable(device: torch.device) -> str | None:
     ``g++``, ``c++`` or ``clang++`` on ``PATH``). ``validate_config`` refuses
     ``compile=true`` with this reason before a run directory exists.
     """
-    if not torch._dynamo.is_dynamo_supported():
+    if not dynamo_supported():
         return f"torch.compile is not supported on Python {sys.version.split()[0]} with torch {torch.__version__}"
     if device.type == "cpu" and not (os.environ.get("CXX") or any(shutil.which(cxx) for cxx in ("g++", "c++", "clang++"))):
         return "torch.compile's CPU backend (inductor) needs a C++ compiler, and none is on PATH (nor in $CXX)"

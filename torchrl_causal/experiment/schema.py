@@ -37,6 +37,7 @@ from typing import Any, Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
+from torchrl_causal.compat import config_child, config_holds_value
 from torchrl_causal.errors import TorchRLCausalError
 from torchrl_causal.experiment.device import compile_unavailable, resolve_device
 
@@ -481,8 +482,8 @@ def _check_ranges(node: DictConfig, where: str) -> None:
 
 
 def _leaves(node: Any, where: str) -> list[str]:
-    if isinstance(node, DictConfig) and not node._is_none() and not node._is_missing() and len(node):
-        return [leaf for key in node.keys() for leaf in _leaves(node._get_node(key), f"{where}.{key}")]
+    if isinstance(node, DictConfig) and config_holds_value(node) and len(node):
+        return [leaf for key in node.keys() for leaf in _leaves(config_child(node, key), f"{where}.{key}")]
     return [where]
 
 
@@ -494,10 +495,10 @@ def _unknown_keys(node: DictConfig, where: str) -> list[str]:
     if schema is None or not dataclasses.is_dataclass(schema):
         return []  # a free-form node (``env.make``, ``env.expert``): its target's arguments
     declared = {spec.name for spec in dataclasses.fields(schema)}
-    unknown = [leaf for key in node.keys() if key not in declared for leaf in _leaves(node._get_node(key), f"{where}{key}")]
+    unknown = [leaf for key in node.keys() if key not in declared for leaf in _leaves(config_child(node, key), f"{where}{key}")]
     for key in declared & set(node.keys()):
-        value = node._get_node(key)
-        if isinstance(value, DictConfig) and not value._is_none() and not value._is_missing():
+        value = config_child(node, key)
+        if isinstance(value, DictConfig) and config_holds_value(value):
             unknown += _unknown_keys(value, f"{where}{key}.")
     return unknown
 

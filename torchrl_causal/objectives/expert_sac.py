@@ -20,6 +20,7 @@ from tensordict.utils import NestedKey
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives import SACLoss
 
+from torchrl_causal.compat import SACLossWithHooks
 from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingIndicator
 from torchrl_causal.objectives.utils import eval_mode
 
@@ -42,7 +43,7 @@ BC_SCALES: tuple[str, ...] = ("expert_value", "actor_loss")
 _BC_ACTION_MARGIN = 1e-3
 
 
-class ExpertFlaggedSACLoss(SACLoss):
+class ExpertFlaggedSACLoss(SACLossWithHooks):
     """:class:`~torchrl.objectives.SACLoss` (v2, no state-value network) that reads an ``"expert"`` flag.
 
     Subclasses replace SAC's critic loss; the actor loss, entropy tuning toward
@@ -223,17 +224,16 @@ class ExpertFlaggedSACLoss(SACLoss):
         """Whether the critics read the absorbing-state flags."""
         return isinstance(self.qvalue_network, AbsorbingIndicator)
 
-    def _set_in_keys(self) -> None:
-        super()._set_in_keys()
+    def adjust_in_keys(self, keys: list[NestedKey]) -> list[NestedKey]:
         reward = ("next", self.tensor_keys.reward)
         extra = [self.tensor_keys.expert]
         if self.absorbing:
             extra.append(("next", ABSORBING_KEY))
-        self._in_keys = [key for key in self._in_keys if key != reward] + extra
+        return [key for key in keys if key != reward] + extra
 
-    def _compute_target_v2(self, tensordict: TensorDictBase) -> torch.Tensor:
+    def critic_target(self, tensordict: TensorDictBase) -> torch.Tensor:
         with eval_mode(self.actor_network, self.qvalue_network):
-            return super()._compute_target_v2(tensordict)
+            return super().critic_target(tensordict)
 
     def expert_flag(self, tensordict: TensorDictBase) -> torch.Tensor:
         """Returns the boolean expert flag of shape ``batch + (1,)``, with a clear error if it is malformed."""

@@ -31,7 +31,7 @@ from tensordict.utils import NestedKey
 from torchrl.objectives import ClipPPOLoss, GAILLoss
 from torchrl.objectives.utils import ValueEstimators
 
-from torchrl_causal.compat import reduce_loss
+from torchrl_causal.compat import InKeysHook, reduce_loss
 from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingIndicator
 from torchrl_causal.objectives.utils import eval_mode
 
@@ -48,7 +48,7 @@ __all__ = [
 GAIL_REWARDS: tuple[str, ...] = ("logit", "positive")
 
 
-class GAILDiscriminatorLoss(GAILLoss):
+class GAILDiscriminatorLoss(InKeysHook, GAILLoss):
     r"""GAIL's discriminator loss on logits, with a per-sample gradient penalty.
 
     For ``N`` expert and ``N`` policy pairs and the discriminator logit :math:`\ell`,
@@ -117,11 +117,10 @@ class GAILDiscriminatorLoss(GAILLoss):
         """Whether the discriminator reads absorbing-state flags."""
         return isinstance(self.discriminator_network, AbsorbingIndicator)
 
-    def _set_in_keys(self) -> None:
-        super()._set_in_keys()
-        if self.absorbing:
-            keys = self.tensor_keys
-            self._in_keys = sorted({*self._in_keys, keys.expert_absorbing, keys.collector_absorbing}, key=str)
+    def adjust_in_keys(self, keys: list[NestedKey]) -> list[NestedKey]:
+        if not self.absorbing:
+            return keys
+        return sorted({*keys, self.tensor_keys.expert_absorbing, self.tensor_keys.collector_absorbing}, key=str)
 
     def _logits(self, observation: torch.Tensor, action: torch.Tensor, absorbing: torch.Tensor | None) -> torch.Tensor:
         keys = self.tensor_keys

@@ -17,6 +17,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.modules.distributions.utils import rsample_and_log_prob
 from torchrl.objectives.utils import ValueEstimators
 
+from torchrl_causal.compat import assert_on_device, entropy_coefficient, priority_weights, qvalues_per_critic, reduce_loss
 from torchrl_causal.objectives.expert_sac import ALPHA_CLAMP, ExpertFlaggedSACLoss
 from torchrl_causal.objectives.utils import eval_mode
 
@@ -177,8 +178,8 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
             actions, log_prob = rsample_and_log_prob(dist, (self.num_value_samples,))
         samples = states.select(*self.qvalue_network.in_keys, strict=False).expand(self.num_value_samples, *states.shape)
         samples.set(self.tensor_keys.action, actions)
-        q = self._vmap_qnetworkN0(samples, qvalue_params).get(self.tensor_keys.state_action_value)
-        return q - self._alpha * log_prob.unsqueeze(-1)
+        q = qvalues_per_critic(self, samples, qvalue_params).get(self.tensor_keys.state_action_value)
+        return q - entropy_coefficient(self) * log_prob.unsqueeze(-1)
 
     def bootstrap_discount(self, tensordict: TensorDictBase) -> torch.Tensor:
         r""":math:`\gamma (1 - d)` of every transition, shape ``batch + (1,)``: TorchRL's TD(0)
@@ -201,8 +202,8 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
         else:
             # On an accelerator, or inside a compiled graph, a host read would stall the
             # update loop (or split the graph): the device checks the count itself.
-            torch._assert_async(num_expert > 0, message)
-        weights = self._maybe_get_priority_weight(tensordict)
+            assert_on_device(num_expert > 0, message)
+        weights = priority_weights(self, tensordict)
         discount = self.bootstrap_discount(tensordict)
         next_states = tensordict.get("next")
         if self.variant == "paper":
@@ -214,8 +215,8 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
             both = torch.cat([tensordict.select(*keys, strict=False), next_states.select(*keys, strict=False)])
             state_value, next_value = self.soft_values(both, self.qvalue_network_params).mean(1).chunk(2, dim=1)
             value_term = state_value - discount * next_value
-        q = self._vmap_qnetworkN0(
-            tensordict.select(*self.qvalue_network.in_keys, strict=False), self.qvalue_network_params
+        q = qvalues_per_critic(
+            self, tensordict.select(*self.qvalue_network.in_keys, strict=False), self.qvalue_network_params
         ).get(self.tensor_keys.state_action_value)
         # The paper's critic is SQIL with expert reward 1/p (p the batch's expert fraction):
         # its goal is worth (1/p) / (1 - gamma), goal_bootstrap's value at expert reward 1.
@@ -223,6 +224,6 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
         implicit_reward = q - discount * next_value - self.goal_bootstrap(tensordict) * inverse_fraction
         expert_weight = expert * inverse_fraction
         per_sample = (0.5 * implicit_reward - expert_weight) * implicit_reward + value_term
-        loss = self._reduce_loss(per_sample.sum(0).squeeze(-1), tensordict=tensordict, weights=weights)
+        loss = reduce_loss(self, per_sample.sum(0).squeeze(-1), tensordict=tensordict, weights=weights)
         td_error = implicit_reward.detach().abs().max(0)[0].squeeze(-1)
         return loss, {"td_error": td_error}

@@ -17,6 +17,8 @@ from typing import Any
 from torchrl.collectors import Collector
 from torchrl.envs import TransformedEnv
 
+from torchrl_causal.compat import collector_carrier
+
 __all__ = ["ResumableCollector"]
 
 
@@ -49,12 +51,10 @@ class ResumableCollector(Collector):
     def state_dict(self) -> OrderedDict:
         state = super().state_dict()
         state["base_env_state_dict"] = self.env.base_env.state_dict()
-        # The carrier lives in a private attribute of TorchRL's collector: it is the one
-        # piece of its runtime state that its own state dict leaves out.
-        state["carrier"] = self._carrier.to_dict()
+        state["carrier"] = collector_carrier(self).to_dict()
         return state
 
     def load_state_dict(self, state_dict: OrderedDict, **kwargs: Any) -> None:
         super().load_state_dict(state_dict, **kwargs)
         self.env.base_env.load_state_dict(state_dict["base_env_state_dict"])
-        self._carrier.update_(state_dict["carrier"])
+        collector_carrier(self).update_(state_dict["carrier"])
