@@ -17,7 +17,10 @@ from hydra.utils import get_class, get_object, instantiate
 from omegaconf import OmegaConf
 from omegaconf.errors import InterpolationResolutionError
 
+from torchrl_causal.algorithms import ALGORITHMS, Row
+from torchrl_causal.algorithms import ROWS as REGISTERED_ROWS
 from torchrl_causal.experiment import CONFIG_DIR, ConfigValueError, compose_config, run_label, validate_config
+from torchrl_causal.experiment.schema import ALGO_SCHEMAS, AlgoConfig, algo_schema
 from torchrl_causal.trainers import Trainer
 
 ENVS = ("rovermaze_u", "rovermaze_medium", "rovermaze_large", "route_choice",
@@ -263,8 +266,9 @@ def test_overrides_reach_env_window_and_run_dir() -> None:
 @pytest.mark.parametrize(
     ("experiment", "swept"),
     [
-        ("paper_table", {"row": "expert,c_bc,c_gail,c_sqil,c_iq_learn,c_iq_learn_garg,bc,gail,sqil,iq_learn,sqil_wm",
+        ("paper_table", {"row": "expert,c_bc,c_gail,c_sqil,c_iq_learn,bc,gail,sqil,iq_learn,c_iq_learn_garg,sqil_wm",
                          "seed": "0,1,2"}),
+        ("antmaze_table", {"row": "expert,c_bc,c_gail,c_sqil,c_iq_learn,bc,gail,sqil,iq_learn", "seed": "0"}),
         ("window_ablation", {"window.k": "0,1,2,5,10,100", "causal": "true"}),
         ("horizon_ablation", {"env.horizon": "500,1000,1500", "env": "antmaze_medium,antmaze_large"}),
         ("strength_ablation", {"env.confounding_strength": "0.15,0.5,0.85,1.0"}),
@@ -280,13 +284,25 @@ def test_experiments_sweep_the_papers_grids(experiment: str, swept: dict[str, st
         assert params[key].replace(" ", "") == value
 
 
-ROWS = sorted(path.stem for path in (CONFIG_DIR / "row").glob("*.yaml"))
+ROWS = [row.name for row in REGISTERED_ROWS]
+
+
+def test_the_registry_names_every_algo_option_with_the_schema_that_types_it() -> None:
+    assert sorted(entry.name for entry in ALGORITHMS) == GROUPS["algo"]
+    assert {entry.schema for entry in ALGORITHMS} == set(ALGO_SCHEMAS)
+    for entry in ALGORITHMS:
+        cfg = compose_config([f"algo={entry.name}"])
+        assert cfg.algo.name == entry.name
+        assert OmegaConf.get_type(cfg.algo) is ALGO_SCHEMAS[entry.schema] is algo_schema(entry.name)
+    assert algo_schema("not_registered") is AlgoConfig
 
 
 @pytest.mark.parametrize("row", ROWS)
 def test_each_table_row_is_the_run_it_names(row: str) -> None:
     cfg = compose_config(["experiment=paper_table", f"row={row}", "env=rovermaze_medium"])
     assert cfg.run_name.split("/")[-2] == row
+    registered = Row.parse(row)
+    assert (cfg.causal, cfg.window.window_matched) == (registered.causal, registered.window_matched)
     assert cfg.algo.name == row.removeprefix("c_").removesuffix("_wm")
     if row.endswith("iq_learn_garg"):
         assert cfg.algo.loss.variant == "iq_learn"

@@ -23,7 +23,7 @@ NAME = PACKAGE.name
 #: imports only units of lower floors. ``envs`` stands on ``experiment`` because the ant
 #: skill's trainer (``envs/locomotion.py``) checkpoints with the run directory's helpers.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("errors", "conf", "extras"),
+    ("errors", "conf", "extras", "algorithms"),
     ("graphs", "progress", "compat"),
     ("modules", "objectives", "transforms", "data"),
     ("experiment",),

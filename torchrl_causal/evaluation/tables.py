@@ -17,6 +17,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from torchrl_causal.algorithms import Row, TABLE1_ROWS
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.evaluation.runs import RunRecord, Setting
 from torchrl_causal.evaluation.seed_statistics import bootstrap_interval, interquartile_mean
@@ -46,14 +47,8 @@ __all__ = [
     "effect_markdown",
 ]
 
-TABLE1_ALGORITHMS: tuple[str, ...] = (
-    "expert", "c_bc", "c_gail", "c_sqil", "c_iq_learn", "bc", "gail", "sqil", "iq_learn",
-)
-_DISPLAY = {
-    "expert": "Expert", "c_bc": "C-BC", "c_gail": "C-GAIL", "c_sqil": "C-SQIL", "c_iq_learn": "C-IQ-Learn",
-    "bc": "BC", "gail": "GAIL", "sqil": "SQIL", "iq_learn": "IQ-Learn",
-    "c_iq_learn_garg": "C-IQ-Learn (Garg et al.)", "iq_learn_garg": "IQ-Learn (Garg et al.)",
-}
+#: Table 1's row labels in its order (:data:`torchrl_causal.algorithms.TABLE1_ROWS`).
+TABLE1_ALGORITHMS: tuple[str, ...] = tuple(row.name for row in TABLE1_ROWS)
 CSV_COLUMNS: tuple[str, ...] = (
     "algorithm", "regime", "success_rate", "success_se", "return_mean", "return_std",
     "ep_len_mean", "ep_len_std", "n_episodes", "seeds",
@@ -130,18 +125,15 @@ def read_reported_rows(path: str | Path) -> dict[Setting, dict[str, dict[str, Re
 
 
 def display_name(label: str) -> str:
-    """Column header of a run label.
+    """Column header of a run label (:attr:`torchrl_causal.algorithms.Row.label`; a label
+    no registered algorithm makes is its own header).
 
     Examples:
         >>> display_name("c_iq_learn"), display_name("sqil_wm"), display_name("c_bc_no-X")
         ('C-IQ-Learn', 'SQIL (window-matched)', 'C-BC (no X)')
     """
-    label, _, dropped = label.partition("_no-")
-    if dropped:
-        return f"{display_name(label)} (no {', '.join(dropped.split('-'))})"
-    if label.endswith("_wm") and label[:-3] in _DISPLAY:
-        return f"{_DISPLAY[label[:-3]]} (window-matched)"
-    return _DISPLAY.get(label, label)
+    row = Row.parse(label)
+    return label if row is None else row.label
 
 
 def ordered_labels(labels: Iterable[str]) -> list[str]:

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
+from torchrl_causal.algorithms import ROW_SETS, row_names
 from torchrl_causal.experiment.run_directory import run_label
 from torchrl_causal.experiment.schema import register_configs
 
@@ -62,12 +63,24 @@ def product(*factors: int) -> int:
     return math.prod(int(factor) for factor in factors)
 
 
-_RESOLVERS = {"run_label": run_label, "stable_id": stable_id, "product": product}
+def rows(which: str) -> str:
+    """``${rows:table1}``, ``${rows:all}``: a sweep's row list, from :mod:`torchrl_causal.algorithms`.
+
+    Examples:
+        >>> rows("table1")
+        'expert,c_bc,c_gail,c_sqil,c_iq_learn,bc,gail,sqil,iq_learn'
+    """
+    if which not in ROW_SETS:
+        raise ValueError(f"${{rows:{which}}}: no such row set; use one of {sorted(ROW_SETS)}")
+    return row_names(ROW_SETS[which])
+
+
+_RESOLVERS = {"run_label": run_label, "stable_id": stable_id, "product": product, "rows": rows}
 
 
 def register_resolvers() -> None:
     """Registers ``${run_label:algo,causal,window_matched,drop}``, ``${stable_id:...}``,
-    ``${product:...}`` and the schemas (idempotent)."""
+    ``${product:...}``, ``${rows:...}`` and the schemas (idempotent)."""
     for name, resolver in _RESOLVERS.items():
         if not OmegaConf.has_resolver(name):
             OmegaConf.register_new_resolver(name, resolver)

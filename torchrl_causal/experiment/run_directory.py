@@ -45,6 +45,7 @@ from typing import Any
 import torch
 from omegaconf import DictConfig, OmegaConf
 
+from torchrl_causal.algorithms import Row
 from torchrl_causal.errors import TorchRLCausalError
 
 __all__ = [
@@ -122,12 +123,9 @@ def run_label(algorithm: str, causal: bool, window_matched: bool = False, drop: 
         >>> run_label("sqil", False, window_matched=True), run_label("bc", True, drop=["X"])
         ('sqil_wm', 'c_bc_no-X')
     """
-    if algorithm == "expert":
-        return "expert"
-    if causal and window_matched:
+    if causal and window_matched and algorithm != "expert":
         raise ValueError("window.window_matched=true is a non-causal baseline: use it with causal=false")
-    label = f"c_{algorithm}" if causal else f"{algorithm}_wm" if window_matched else algorithm
-    return f"{label}_no-{'-'.join(sorted(drop))}" if drop else label
+    return Row(algorithm, causal, window_matched, tuple(drop)).name
 
 
 def _temporary(path: Path) -> Path:

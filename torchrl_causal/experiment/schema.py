@@ -37,6 +37,7 @@ from typing import Any, Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
+from torchrl_causal.algorithms import ROWS, algorithm
 from torchrl_causal.compat import config_child, config_holds_value
 from torchrl_causal.errors import TorchRLCausalError
 from torchrl_causal.experiment.device import compile_unavailable, resolve_device
@@ -440,7 +441,8 @@ class Config:
     run_dir: str = MISSING
 
 
-#: Schema of each ``conf/algo`` option, stored in the ``algo`` group as ``schema_<name>``.
+#: The schemas of the ``conf/algo`` options (an algorithm names its own in
+#: :mod:`torchrl_causal.algorithms`), stored in the ``algo`` group as ``schema_<name>``.
 ALGO_SCHEMAS: dict[str, type[AlgoConfig]] = {
     "expert": AlgoConfig,
     "bc": BCConfig,
@@ -450,15 +452,29 @@ ALGO_SCHEMAS: dict[str, type[AlgoConfig]] = {
 }
 
 
+def algo_schema(name: str) -> type[AlgoConfig]:
+    """The schema of the registered algorithm ``name`` (:mod:`torchrl_causal.algorithms`),
+    or :class:`AlgoConfig` for an algorithm the registry does not know."""
+    try:
+        return ALGO_SCHEMAS[algorithm(name).schema]
+    except KeyError:
+        return AlgoConfig
+
+
 def register_configs() -> None:
     """Stores the schemas in Hydra's ConfigStore (idempotent): ``schema`` for the top
-    level, ``schema_<algo>`` in the ``algo`` group."""
+    level, ``schema_<algo>`` in the ``algo`` group; and the ``row`` group, one option per
+    :data:`~torchrl_causal.algorithms.ROWS` entry, which sets the algorithm, ``causal``
+    and the window."""
     store = ConfigStore.instance()
     store.store(name="schema", node=Config)
     for name, schema in ALGO_SCHEMAS.items():
         store.store(group="algo", name=f"schema_{name}", node=schema)
     for name, schema in LOGGER_SCHEMAS.items():
         store.store(group="logger", name=f"schema_{name}", node=schema)
+    for row in ROWS:
+        defaults = [{"override /algo": row.algorithm}, {"override /window": row.window}, "_self_"]
+        store.store(group="row", name=row.name, package="_global_", node={"defaults": defaults, "causal": row.causal})
 
 
 # ---------------------------------------------------------------------- ranges
@@ -518,8 +534,8 @@ def _check_known_keys(cfg: DictConfig) -> None:
     if not unknown:
         return
     key = unknown[0]
-    algo_schema = ALGO_SCHEMAS.get(str(OmegaConf.select(cfg, "algo.name")), AlgoConfig)
-    close = difflib.get_close_matches(key, _known_keys(Config) + _known_keys(algo_schema, "algo."), n=1)
+    schema = algo_schema(str(OmegaConf.select(cfg, "algo.name")))
+    close = difflib.get_close_matches(key, _known_keys(Config) + _known_keys(schema, "algo."), n=1)
     hint = f"; did you mean {close[0]}?" if close else ""
     raise ConfigValueError(f"config key {key} is unknown (added with +{key}=...?): no schema declares it, so the run "
                            f"would store it and ignore it{hint}")
