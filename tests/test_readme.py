@@ -1,6 +1,6 @@
-"""The README's results tables against the results files they quote.
+"""The results tables of the README and ``docs/results.md`` against the results files they quote.
 
-Every results table in the README is preceded by ``<!-- figures: results/<file> -->``:
+Every results table in those documents is preceded by ``<!-- figures: results/<file> -->``:
 
 * a ``.csv`` (the report's layout): the table has a ``regime`` column and one column per
   algorithm (its display name); each ``train`` / ``deploy`` cell must equal the file's
@@ -9,7 +9,8 @@ Every results table in the README is preceded by ``<!-- figures: results/<file> 
   (the leading number, without its ``± SE``), the row of the same algorithm in the file's
   table with the same column headers.
 
-A figure that changes in ``results/`` without the README following fails here.
+A figure that changes in ``results/`` without the documents following fails here; so does a
+link of the README to a file that is not there.
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ from torchrl_causal.evaluation.tables import REGIMES, display_name
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
+#: The documents whose results tables quote ``results/``: the README's one table, the rest in docs.
+DOCUMENTS = (README, ROOT / "docs" / "results.md")
 MARKER = re.compile(r"<!--\s*figures:\s*(\S+)\s*-->")
 
 Table = list[list[str]]
@@ -60,7 +63,7 @@ def marked_tables(text: str) -> list[tuple[str, Table]]:
         match = MARKER.search(line)
         if match:
             following = next((i for i in range(index + 1, len(lines)) if lines[i].strip()), None)
-            assert following in tables, f"README line {index + 1}: the figures marker is not followed by a table"
+            assert following in tables, f"line {index + 1}: the figures marker is not followed by a table"
             marked.append((match.group(1), tables[following]))
     return marked
 
@@ -104,20 +107,36 @@ def check_against_markdown(table: Table, path: Path) -> int:
     return checked
 
 
-def test_every_results_table_is_marked() -> None:
-    lines = README.read_text().splitlines()
+def _figure_tables(document: Path) -> tuple[list[Table], list[Table]]:
+    """The results tables of ``document`` (first column ``regime`` or ``strength``): all, and those without a marker."""
+    lines = document.read_text().splitlines()
     marked_headers = {index for index, _ in markdown_tables(lines)
                       if any(MARKER.search(line) for line in lines[max(0, index - 2):index])}
-    figure_tables = [index for index, rows in markdown_tables(lines) if rows[0][0] in ("regime", "strength")]
-    assert len(figure_tables) >= 7, f"the README has {len(figure_tables)} results tables"
-    unmarked = [rows for index, rows in markdown_tables(lines) if index in figure_tables and index not in marked_headers]
-    assert not unmarked, f"results tables without a figures marker: {[rows[0] for rows in unmarked]}"
+    figures = [(index, rows) for index, rows in markdown_tables(lines) if rows[0][0] in ("regime", "strength")]
+    return [rows for _, rows in figures], [rows for index, rows in figures if index not in marked_headers]
 
 
-@pytest.mark.parametrize("quoted, table", marked_tables(README.read_text()), ids=lambda x: str(x)[:40])
-def test_readme_table_matches_its_results_file(quoted: str, table: Table) -> None:
+def test_every_results_table_is_marked() -> None:
+    tables = {document.name: _figure_tables(document) for document in DOCUMENTS}
+    assert len(tables["README.md"][0]) == 1, "the README shows one results table (the demo's); the rest are in docs"
+    assert len(tables["results.md"][0]) >= 6, f"docs/results.md has {len(tables['results.md'][0])} results tables"
+    unmarked = {name: [rows[0] for rows in tables[name][1]] for name in tables if tables[name][1]}
+    assert not unmarked, f"results tables without a figures marker: {unmarked}"
+
+
+def test_readme_links_resolve() -> None:
+    targets = re.findall(r"\]\(([^)#]+)\)", README.read_text())
+    assert "docs/results.md" in targets
+    assert not [target for target in targets if "://" not in target and not (ROOT / target).exists()]
+
+
+MARKED = [(document.name, quoted, table) for document in DOCUMENTS for quoted, table in marked_tables(document.read_text())]
+
+
+@pytest.mark.parametrize("document, quoted, table", MARKED, ids=lambda x: str(x)[:40])
+def test_readme_table_matches_its_results_file(document: str, quoted: str, table: Table) -> None:
     path = ROOT / quoted
-    assert path.is_file(), f"the README quotes {quoted}, which does not exist"
+    assert path.is_file(), f"{document} quotes {quoted}, which does not exist"
     check = check_against_csv if path.suffix == ".csv" else check_against_markdown
     assert check(table, path) > 0
 
