@@ -328,6 +328,21 @@ def test_multi_process_collection_uses_the_current_policy(tmp_path: Path) -> Non
     assert not torch.allclose(trainer.policy_buffer[:40]["action"], expected[:40], atol=1e-2)  # random phase
 
 
+def test_a_run_resolves_its_device_once_for_the_trainer_and_the_evaluator(tmp_path: Path, monkeypatch) -> None:
+    import torchrl_causal.evaluation.evaluator as evaluator_module
+    import torchrl_causal.lifecycle as lifecycle_module
+    import torchrl_causal.trainers.base as trainer_module
+
+    calls = {module.__name__: 0 for module in (lifecycle_module, trainer_module, evaluator_module)}
+    for module in (lifecycle_module, trainer_module, evaluator_module):
+        def counting(spec, name=module.__name__):
+            calls[name] += 1
+            return resolve_device(spec)
+        monkeypatch.setattr(module, "resolve_device", counting)
+    run(tiny_config(tmp_path, "route_choice", "bc", True))  # trains, selects, evaluates both regimes
+    assert calls == {lifecycle_module.__name__: 1, trainer_module.__name__: 0, evaluator_module.__name__: 0}
+
+
 def test_a_run_from_a_missing_device_evaluates_on_the_cpu(tmp_path: Path) -> None:
     from omegaconf import OmegaConf
 

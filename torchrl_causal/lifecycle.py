@@ -156,13 +156,14 @@ def _train_and_evaluate(cfg: DictConfig, run_dir: RunDirectory, trainer_class: t
                         window: AdjustmentWindow | None, total: int) -> dict[str, EvaluationResult]:
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.threads)
-    evaluator = Evaluator(cfg, window, progress=cfg.progress_bar)
+    device = resolve_device(cfg.device)  # once: the trainer and the evaluator share it
+    evaluator = Evaluator(cfg, window, progress=cfg.progress_bar, device=device)
     policy = None  # the env's expert
     if trainer_class is None:  # what the trainer records for a trained run: code, packages, CPU, threads
-        run_dir.record_attempt(attempt_identity(None, cfg.compile, resolve_device(cfg.device)), progress=0)
+        run_dir.record_attempt(attempt_identity(None, cfg.compile, device), progress=0)
     else:
         run_dir.write_json(run_dir.window_file, window.to_dict())
-        trainer = trainer_class(cfg, run_dir, window, evaluator.periodic)
+        trainer = trainer_class(cfg, run_dir, window, evaluator.periodic, device=device)
         trainer.fit()
         policy = trainer.best_policy()
     results = evaluator.final(policy)
@@ -205,15 +206,15 @@ def open_run(run_dir: str | Path, *, confounding_strength: float | None = None,
     if confounding_strength is not None:
         cfg.env.confounding_strength = float(confounding_strength)
     if device is not None:
-        resolve_device(str(device))
+        resolved = resolve_device(str(device))
         cfg.device = str(device)
     else:
         try:
-            resolve_device(cfg.device)
+            resolved = resolve_device(cfg.device)
         except ValueError:
-            cfg.device = "cpu"
+            cfg.device, resolved = "cpu", torch.device("cpu")
     window = AdjustmentWindow.from_dict(run.read_json(run.window_file)) if cfg.algo.trainer else None
-    evaluator = Evaluator(cfg, window, progress=True)
+    evaluator = Evaluator(cfg, window, progress=True, device=resolved)
     return run, evaluator, evaluator.load_best_policy(run) if window is not None else None
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import torch
 from omegaconf import DictConfig
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs import EnvBase
@@ -63,12 +64,16 @@ class Evaluator:
         window: the adjustment window the policy conditions on; ``None`` evaluates in
             the raw env (the expert).
         progress: report progress over episodes.
+        device: where :meth:`load_best_policy` puts the policy: ``cfg.device`` as the caller
+            resolved it, resolved when a policy is loaded if not given.
     """
 
-    def __init__(self, cfg: DictConfig, window: AdjustmentWindow | None, *, progress: bool = False) -> None:
+    def __init__(self, cfg: DictConfig, window: AdjustmentWindow | None, *, progress: bool = False,
+                 device: torch.device | None = None) -> None:
         self.cfg = cfg
         self.window = window
         self.progress = progress
+        self.device = device
 
     def make_env(self, regime: str, batch_size: int, seed: int) -> EnvBase:
         """The env a policy of this run acts in."""
@@ -127,7 +132,7 @@ class Evaluator:
 
     def load_best_policy(self, run: RunDirectory) -> TensorDictModuleBase:
         """The run's actor rebuilt from the config on ``cfg.device`` with ``checkpoints/best.pt`` loaded."""
-        device = resolve_device(self.cfg.device)
+        device = resolve_device(self.cfg.device) if self.device is None else self.device
         state = run.load_checkpoint(best=True, map_location=device)
         if state is None:
             raise CheckpointError(f"run {run.path} has no checkpoints/best.pt to evaluate (an archived run keeps its "

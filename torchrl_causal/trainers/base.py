@@ -85,6 +85,9 @@ class Trainer(ABC):
         run: its directory.
         window: the adjustment window the policy conditions on.
         evaluate: scores a policy for best-checkpoint selection.
+        device: where networks, losses and replay batches live: the run's ``cfg.device``
+            as its caller resolved it (:func:`~torchrl_causal.experiment.device.resolve_device`),
+            resolved here when not given.
     """
 
     unit: ClassVar[str] = "steps"
@@ -92,12 +95,12 @@ class Trainer(ABC):
     budget_key: ClassVar[str]
 
     def __init__(self, cfg: DictConfig, run: RunDirectory, window: AdjustmentWindow,
-                 evaluate: Callable[[TensorDictModuleBase], Score]) -> None:
+                 evaluate: Callable[[TensorDictModuleBase], Score], *, device: torch.device | None = None) -> None:
         self.cfg = cfg
         self.run = run
         self.window = window
         self.evaluate = evaluate
-        self.device = resolve_device(cfg.device)
+        self.device = resolve_device(cfg.device) if device is None else device
         self.progress = 0
         self.best_return = -math.inf
         self.best_progress: int | None = None
