@@ -98,7 +98,7 @@ def assert_on_device(condition: torch.Tensor, message: str) -> None:
     torch._assert_async(condition, message)
 
 
-def config_child(node: BaseContainer, key: Any) -> Node:
+def config_child(node: BaseContainer, key: Any) -> Any:
     """The node under ``key`` of an OmegaConf container, its interpolations left unresolved."""
     return node._get_node(key)
 
@@ -124,6 +124,8 @@ class InKeysHook:
         >>> "flag" in FlaggedGAIL(discriminator).in_keys
         True
     """
+
+    _in_keys: list[NestedKey]  # TorchRL's LossModule sets it
 
     def adjust_in_keys(self, keys: list[NestedKey]) -> list[NestedKey]:
         """The keys the loss reads, given those its TorchRL parent reads (``keys``, a copy)."""
