@@ -259,7 +259,8 @@ def _iq_learn_update(compile: bool) -> ActorCriticUpdate:
     torch.manual_seed(0)
     spec = Bounded(-1.0, 1.0, shape=(2,))
     loss = IQLearnLoss(make_tanh_gaussian_actor(3, spec, hidden=16, num_blocks=1, dropout=0.05),
-                       make_qvalue_network(3, spec, hidden=16, num_blocks=1), num_value_samples=2)
+                       make_qvalue_network(3, spec, hidden=16, num_blocks=1), num_value_samples=2,
+                       goal_value="expert", bc_weight=0.4)  # the recipe's options: they once split the graph
     loss.make_value_estimator(gamma=0.99)
     adam = partial(torch.optim.Adam, lr=1e-2)
     return ActorCriticUpdate(loss, actor_optimizer=adam, critic_optimizer=adam, alpha_optimizer=adam,
@@ -275,7 +276,7 @@ def _batches(count: int) -> list[TensorDict]:
         "action": torch.rand(8, 2, generator=generator) * 2 - 1,
         "expert": (torch.arange(8) < 4).unsqueeze(-1),
         "next": {"observation": torch.randn(8, 3, generator=generator),
-                 "done": torch.zeros(8, 1, dtype=torch.bool), "terminated": torch.zeros(8, 1, dtype=torch.bool)},
+                 "done": (torch.arange(8) % 4 == 3).unsqueeze(-1), "terminated": (torch.arange(8) % 4 == 3).unsqueeze(-1)},
     }, [8]) for _ in range(count)]
 
 
@@ -284,7 +285,9 @@ def test_compiled_update_matches_eager() -> None:
     """Same seed, same batches: compiled and eager updates give the same losses and weights.
 
     IQ-Learn is the loss compiled here: its graph holds SAC's actor and temperature
-    losses and the K-sample soft value (one compilation costs ~30 s of CPU, so one loss).
+    losses and the K-sample soft value (one compilation costs ~30 s of CPU, so one loss),
+    with the recipe's goal value (a goal-terminated row in each half) and anchor: reading
+    the discount as a tensor once split that graph, and the backward then failed.
     Dropout (0.05) and the action samples draw from the RNG, so this also checks that
     the compiled step keeps eager's random stream.
     """

@@ -161,10 +161,22 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
     #: subclasses whose critic reward is implicit say what it is).
     expert_reward: float = 1.0
 
+    #: The value estimator's discount as a Python float, set by :meth:`make_value_estimator`.
+    _discount: float | None = None
+
+    def make_value_estimator(self, value_type=None, **hyperparams) -> None:
+        super().make_value_estimator(value_type, **hyperparams)
+        # Read once here: ``float()`` of the estimator's gamma buffer inside a compiled loss
+        # splits its graph, and alpha's in-place clamp between the pieces then breaks the
+        # backward (IQ-Learn with the goal value, compiled).
+        self._discount = float(self.value_estimator.gamma)
+
     @property
     def discount(self) -> float:
         """The discount of the value estimator (:meth:`make_value_estimator`)."""
-        return float(self.value_estimator.gamma)
+        if self._discount is None:
+            self.make_value_estimator()  # TorchRL's default estimator, as ``value_estimator`` builds it
+        return self._discount
 
     @property
     def expert_value(self) -> float:
