@@ -182,8 +182,8 @@ def test_behaviour_cloning_anchor_is_td3_bc_on_the_expert_rows(bc_scale: str) ->
 def test_the_expert_value_scale_keeps_the_anchor_when_the_critics_value_is_near_zero() -> None:
     # The failure of the |loss_actor| scale: with critics whose values at the actor's actions
     # cancel its entropy term, the actor loss is ~0 and that anchor vanishes; this one does not.
-    actor, loss = _actor_and_loss(bc_weight=0.4, bc_scale="actor_loss")
-    _, constant = _actor_and_loss(bc_weight=0.4)
+    actor, loss = _actor_and_loss(bc_weight=0.4)
+    _, constant = _actor_and_loss(bc_weight=0.4, bc_scale="expert_value")
     batch = _batch()
     for module in (loss, constant):
         for param in module.qvalue_network_params.values(True, True):

@@ -176,8 +176,8 @@ class ValueEstimatorConfig:
 class BCScale(str, enum.Enum):
     """``bc_scale=...`` of the SQIL / IQ-Learn losses: what the anchor's weight multiplies."""
 
-    expert_value = "expert_value"
     actor_loss = "actor_loss"
+    expert_value = "expert_value"
 
 
 @dataclass
@@ -191,7 +191,7 @@ class SACStyleLossConfig(Target):
     absorbing: bool = MISSING  # absorbing states after termination, for expert and policy data
     goal_value: Optional[GoalValue] = None  # null: the goal is worth zero (the paper); expert: r_E / (1 - gamma)
     bc_weight: Optional[float] = _ranged(gt=0.0, default=None)  # null: no behaviour-cloning anchor on the actor
-    bc_scale: BCScale = BCScale.expert_value  # the anchor's scale: r_E / (1 - gamma), or |loss_actor| (the first version)
+    bc_scale: BCScale = BCScale.actor_loss  # the anchor's scale: |loss_actor| (~ mean Q), or r_E / (1 - gamma)
 
 
 class GoalValue(str, enum.Enum):
