@@ -176,6 +176,7 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
         """The discount of the value estimator (:meth:`make_value_estimator`)."""
         if self._discount is None:
             self.make_value_estimator()  # TorchRL's default estimator, as ``value_estimator`` builds it
+        assert self._discount is not None  # set by make_value_estimator (for the type checker)
         return self._discount
 
     @property
