@@ -15,9 +15,7 @@ import statistics
 from pathlib import Path
 
 from torchrl_causal.cli.demo import DEMO_RUNS, demo_overrides
-from torchrl_causal.evaluation import aggregate, load_runs
-from torchrl_causal.evaluation.metrics import EvaluationResult
-from torchrl_causal.evaluation.tables import EffectTargets
+from torchrl_causal.evaluation import aggregate, effect_checks, load_runs
 from torchrl_causal.experiment import compose_config
 from torchrl_causal.experiment.interrupts import run_in_processes
 from torchrl_causal.lifecycle import run
@@ -26,29 +24,6 @@ from torchrl_causal.lifecycle import run
 def run_overrides(overrides: list[str]) -> int:
     run(compose_config(overrides))
     return 0
-
-
-def claim_margins(table: dict[str, dict[str, EvaluationResult]],
-                  targets: EffectTargets = EffectTargets()) -> dict[str, float]:
-    """Each of :func:`~torchrl_causal.evaluation.tables.effect_checks`' claims on ``table`` as a
-    margin in points: how far the measured value is on the passing side of its threshold."""
-    def rate(label: str, regime: str) -> float | None:
-        result = table.get(label, {}).get(regime)
-        return None if result is None else 100 * result.success_rate
-
-    margins, expert = {}, rate("expert", "deploy")
-    for label in ("c_sqil", "c_iq_learn"):
-        if expert is not None and rate(label, "deploy") is not None:
-            margins[f"{label} deploy >= {targets.causal_fraction:.0%} of expert"] = (
-                rate(label, "deploy") - targets.causal_fraction * expert)
-    for label in ("bc", "gail", "sqil", "iq_learn"):
-        if expert is not None and rate(label, "deploy") is not None:
-            margins[f"{label} deploy <= {targets.non_causal_fraction:.0%} of expert"] = (
-                targets.non_causal_fraction * expert - rate(label, "deploy"))
-        if rate(label, "train") is not None and rate(f"c_{label}", "train") is not None:
-            margins[f"{label} within {targets.train_gap_points:g} points of c_{label} (train)"] = (
-                targets.train_gap_points - abs(rate(label, "train") - rate(f"c_{label}", "train")))
-    return margins
 
 
 def main() -> None:
@@ -71,8 +46,8 @@ def main() -> None:
             for label, row in table.items():
                 print(f"| {seed} | {label} | {100 * row['train'].success_rate:.1f} | "
                       f"{100 * row['deploy'].success_rate:.1f} |")
-            for claim, margin in claim_margins(table).items():
-                margins.setdefault(claim, []).append(margin)
+            for check in effect_checks(table):
+                margins.setdefault(check.claim, []).append(check.margin)
     print("\n| claim | margin per seed (points) | min | mean |\n|---|---|---|---|")
     for claim, values in margins.items():
         print(f"| {claim} | {', '.join(f'{v:+.1f}' for v in values)} | {min(values):+.1f} "

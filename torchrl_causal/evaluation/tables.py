@@ -362,6 +362,9 @@ class EffectCheck:
     claim: str
     measured: str
     passed: bool
+    #: How far the measured value lies on the passing side of the threshold, in points
+    #: (negative: the claim fails); NaN where a check does not compute one.
+    margin: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -428,6 +431,7 @@ def effect_checks(table: Table, targets: EffectTargets = EffectTargets()) -> lis
                     f"{display_name(label)} deploy success >= {causal_fraction:.0%} of the expert's",
                     f"{100 * value:.1f}% vs {100 * expert:.1f}% ({value / expert:.0%})" if expert else f"{100 * value:.1f}%",
                     value >= causal_fraction * expert,
+                    100 * (value - causal_fraction * expert),
                 ))
         for label in ("bc", "gail", "sqil", "iq_learn"):
             value = rate(label, "deploy")
@@ -436,6 +440,7 @@ def effect_checks(table: Table, targets: EffectTargets = EffectTargets()) -> lis
                     f"{display_name(label)} deploy success <= {non_causal_fraction:.0%} of the expert's",
                     f"{100 * value:.1f}% vs {100 * expert:.1f}%",
                     value <= non_causal_fraction * expert,
+                    100 * (non_causal_fraction * expert - value),
                 ))
     for label in ("bc", "gail", "sqil", "iq_learn"):
         plain, causal = rate(label, "train"), rate(f"c_{label}", "train")
@@ -445,6 +450,7 @@ def effect_checks(table: Table, targets: EffectTargets = EffectTargets()) -> lis
                 f"{display_name(label)} within {train_gap_points:g} points of {display_name('c_' + label)} (train regime)",
                 f"{100 * plain:.1f}% vs {100 * causal:.1f}% ({gap:+.1f} points)",
                 abs(gap) <= train_gap_points,
+                train_gap_points - abs(gap),
             ))
     return checks
 
