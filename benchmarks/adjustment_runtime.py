@@ -60,9 +60,7 @@ MAX_RUNS = 100
 
 
 def imitable_variant(template: TimeSliceTemplate, hidden: str) -> TimeSliceTemplate:
-    return template.replace(
-        directed=[e for e in template.directed if e != (hidden, hidden, 1)], reward_slices="last"
-    )
+    return template.replace(directed=[e for e in template.directed if e != (hidden, hidden, 1)], reward_slices="last")
 
 
 def best_time(fn: Callable[[], Any], repeats: int, before: Callable[[], None] = lambda: None) -> float:
@@ -149,13 +147,17 @@ def main() -> None:
         prefix = best_time(lambda: every_set_size(imitable, horizon), args.repeats)
         materialised = best_time(lambda: every_set_materialised(imitable, horizon), args.repeats)
         total_size = every_set_size(imitable, horizon)
-        full_rows.append((f"{name}-imitable", horizon, nodes, total_size, unroll, sets, prefix, materialised,
-                          PAPER_SECONDS.get(horizon)))
+        full_rows.append((f"{name}-imitable", horizon, nodes, total_size, unroll, sets, prefix, materialised, PAPER_SECONDS.get(horizon)))
         witness = refuse(template, horizon)
         refusal = best_time(lambda: refuse(template, horizon), args.repeats)
         refusal_rows.append((name, horizon, len(template.unroll(horizon)), refusal, witness))
-    window_cases = [(name, variant, k, mode) for name in PAPER_TEMPLATES for variant in (False, True)
-                    for k in args.windows for mode in ("exact", "relaxed")]
+    window_cases = [
+        (name, variant, k, mode)
+        for name in PAPER_TEMPLATES
+        for variant in (False, True)
+        for k in args.windows
+        for mode in ("exact", "relaxed")
+    ]
     for name, variant, k, mode in tqdm(window_cases, desc="windows"):
         template, hidden = PAPER_TEMPLATES[name]
         if variant:

@@ -38,10 +38,14 @@ def classify(run_dir: str, regime: str, episodes: int, seed: int, flip_height: f
     flipped = ~success & (end[:, 2] < flip_height)
     upright = ~success & ~flipped
     distance = (end[:, :2] - goal).norm(dim=-1)[upright]
-    return {"episodes": episodes, "success": int(success.sum()), "flipped": int(flipped.sum()),
-            "upright": int(upright.sum()),
-            "upright_median_distance": float(distance.median()) if upright.any() else float("nan"),
-            "upright_within_2m": int((distance < 2.0).sum())}
+    return {
+        "episodes": episodes,
+        "success": int(success.sum()),
+        "flipped": int(flipped.sum()),
+        "upright": int(upright.sum()),
+        "upright_median_distance": float(distance.median()) if upright.any() else float("nan"),
+        "upright_within_2m": int((distance < 2.0).sum()),
+    }
 
 
 def main() -> None:
@@ -53,14 +57,19 @@ def main() -> None:
     parser.add_argument("--flip-height", type=float, default=0.35)
     args = parser.parse_args()
     torch.set_num_threads(1)
-    print(f"| run | {args.regime} episodes | success % | flipped % | upright timeout % "
-          "| upright: median distance to goal (m) | upright within 2 m |")
+    print(
+        f"| run | {args.regime} episodes | success % | flipped % | upright timeout % "
+        "| upright: median distance to goal (m) | upright within 2 m |"
+    )
     print("|---|---:|---:|---:|---:|---:|---:|")
     for run in args.runs:
         c = classify(run, args.regime, args.episodes, args.seed, args.flip_height)
         n = c["episodes"]
-        print(f"| {run} | {n} | {100 * c['success'] / n:.1f} | {100 * c['flipped'] / n:.1f} | {100 * c['upright'] / n:.1f} "
-              f"| {c['upright_median_distance']:.1f} | {c['upright_within_2m']} |", flush=True)
+        print(
+            f"| {run} | {n} | {100 * c['success'] / n:.1f} | {100 * c['flipped'] / n:.1f} | {100 * c['upright'] / n:.1f} "
+            f"| {c['upright_median_distance']:.1f} | {c['upright_within_2m']} |",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

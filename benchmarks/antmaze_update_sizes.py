@@ -44,8 +44,7 @@ def measure(loss: str, size: str, observation_dim: int, compiled: bool, updates:
     variants = (False, True) if compiled else (False,)
     steps, warmup = {}, {}
     for variant in variants:
-        steps[variant] = make_update(loss, cpu, variant, observation_dim=observation_dim, hidden=hidden,
-                                     num_blocks=blocks)
+        steps[variant] = make_update(loss, cpu, variant, observation_dim=observation_dim, hidden=hidden, num_blocks=blocks)
         start = time.perf_counter()
         timed_rate(steps[variant], batches[:3], cpu, "cpu")  # compiles a compiled update
         warmup[variant] = time.perf_counter() - start
@@ -78,22 +77,38 @@ def main() -> None:
     for loss in args.losses:
         for size in args.sizes:
             print(f"measuring {loss} {size}", file=sys.stderr, flush=True)
-            child = [sys.executable, __file__, "--one", loss, size, "--observation-dim", str(args.observation_dim),
-                     "--updates", str(args.updates), "--rounds", str(args.rounds)] + (["--compile"] if args.compile else [])
+            child = [
+                sys.executable,
+                __file__,
+                "--one",
+                loss,
+                size,
+                "--observation-dim",
+                str(args.observation_dim),
+                "--updates",
+                str(args.updates),
+                "--rounds",
+                str(args.rounds),
+            ] + (["--compile"] if args.compile else [])
             output = subprocess.run(child, check=True, capture_output=True, text=True).stdout
             results[loss, size] = json.loads(output.strip().splitlines()[-1])
-    print(f"Updates per CPU-second, {args.observation_dim}-dim input, batch 256, 1 thread, one process per row, "
-          f"{args.rounds} rounds of {args.updates} updates")
-    print(f"| loss | networks | eager updates/s | eager vs {args.sizes[0]} | compiled updates/s | compiled / eager "
-          "| compiling (s) | hours for 100k updates, best |")
+    print(
+        f"Updates per CPU-second, {args.observation_dim}-dim input, batch 256, 1 thread, one process per row, "
+        f"{args.rounds} rounds of {args.updates} updates"
+    )
+    print(
+        f"| loss | networks | eager updates/s | eager vs {args.sizes[0]} | compiled updates/s | compiled / eager "
+        "| compiling (s) | hours for 100k updates, best |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for (loss, size), r in results.items():
         base = results[loss, args.sizes[0]]["eager"]
         best = max(r["eager"], r["compiled"] or 0.0)
-        compiled = (f"{r['compiled']:.1f} | {r['speedup']:.2f} | {r['warmup']:.0f}" if r["compiled"] is not None
-                    else "— | — | —")
-        print(f"| {loss} | {size.replace('x', ' x ')} | {r['eager']:.1f} | {r['eager'] / base:.2f} | {compiled} "
-              f"| {100_000 / best / 3600:.1f} |")
+        compiled = f"{r['compiled']:.1f} | {r['speedup']:.2f} | {r['warmup']:.0f}" if r["compiled"] is not None else "— | — | —"
+        print(
+            f"| {loss} | {size.replace('x', ' x ')} | {r['eager']:.1f} | {r['eager'] / base:.2f} | {compiled} "
+            f"| {100_000 / best / 3600:.1f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -32,11 +32,19 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
-    jobs = [[*demo_overrides(algo, causal, args.root / f"seed{seed}"), f"seed={seed}"]
-            for seed in args.seeds for algo, causal in DEMO_RUNS if algo == "expert"]
+    jobs = [
+        [*demo_overrides(algo, causal, args.root / f"seed{seed}"), f"seed={seed}"]
+        for seed in args.seeds
+        for algo, causal in DEMO_RUNS
+        if algo == "expert"
+    ]
     run_in_processes(run_overrides, jobs, args.workers)  # the experts first: their demonstrations feed the rest
-    jobs = [[*demo_overrides(algo, causal, args.root / f"seed{seed}"), f"seed={seed}"]
-            for seed in args.seeds for algo, causal in DEMO_RUNS if algo != "expert"]
+    jobs = [
+        [*demo_overrides(algo, causal, args.root / f"seed{seed}"), f"seed={seed}"]
+        for seed in args.seeds
+        for algo, causal in DEMO_RUNS
+        if algo != "expert"
+    ]
     if any(run_in_processes(run_overrides, jobs, args.workers)):
         raise SystemExit("a run failed or was interrupted; rerun the same command to resume")
     margins: dict[str, list[float]] = {}
@@ -44,14 +52,12 @@ def main() -> None:
     for seed in args.seeds:
         for setting, table in aggregate(load_runs(args.root / f"seed{seed}")).items():
             for label, row in table.items():
-                print(f"| {seed} | {label} | {100 * row['train'].success_rate:.1f} | "
-                      f"{100 * row['deploy'].success_rate:.1f} |")
+                print(f"| {seed} | {label} | {100 * row['train'].success_rate:.1f} | {100 * row['deploy'].success_rate:.1f} |")
             for check in effect_checks(table):
                 margins.setdefault(check.claim, []).append(check.margin)
     print("\n| claim | margin per seed (points) | min | mean |\n|---|---|---|---|")
     for claim, values in margins.items():
-        print(f"| {claim} | {', '.join(f'{v:+.1f}' for v in values)} | {min(values):+.1f} "
-              f"| {statistics.mean(values):+.1f} |")
+        print(f"| {claim} | {', '.join(f'{v:+.1f}' for v in values)} | {min(values):+.1f} | {statistics.mean(values):+.1f} |")
 
 
 if __name__ == "__main__":

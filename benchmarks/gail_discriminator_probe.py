@@ -47,11 +47,16 @@ def score(loss: GAILDiscriminatorLoss, expert: TensorDictBase, policy: TensorDic
     with eval_mode(network):
         expert_logits = network(expert.clone()).get(logits_key)
         policy_logits = network(policy.clone()).get(logits_key)
-    bce = (F.binary_cross_entropy_with_logits(expert_logits, torch.ones_like(expert_logits))
-           + F.binary_cross_entropy_with_logits(policy_logits, torch.zeros_like(policy_logits)))
+    bce = F.binary_cross_entropy_with_logits(expert_logits, torch.ones_like(expert_logits)) + F.binary_cross_entropy_with_logits(
+        policy_logits, torch.zeros_like(policy_logits)
+    )
     accuracy = ((expert_logits > 0).float().mean() + (policy_logits < 0).float().mean()) / 2
-    return {"accuracy": accuracy.item(), "bce": bce.item(), "expert_logit": expert_logits.mean().item(),
-            "policy_logit": policy_logits.mean().item()}
+    return {
+        "accuracy": accuracy.item(),
+        "bce": bce.item(),
+        "expert_logit": expert_logits.mean().item(),
+        "policy_logit": policy_logits.mean().item(),
+    }
 
 
 def main() -> None:
@@ -78,17 +83,21 @@ def main() -> None:
     rounds = [trainer.discriminator_rows(next(trainer.rollouts).reshape(-1).select(*TRANSITION_KEYS)) for _ in range(2)]
     generator = torch.Generator().manual_seed(args.seed)
     expert_order = torch.randperm(trainer.expert.numel(), generator=generator)
-    expert_train = trainer.expert[expert_order[args.eval_rows:]]
-    held_out = (trainer.expert[expert_order[:args.eval_rows]], draw(rounds[1], args.eval_rows, generator))
-    print(f"{args.run_dir} ({args.checkpoint} checkpoint, {trainer.progress} rounds): "
-          f"{trainer.expert.numel()} expert rows, {rounds[0].numel()} policy rows per round; "
-          f"chance BCE {CHANCE_BCE:.3f}")
+    expert_train = trainer.expert[expert_order[args.eval_rows :]]
+    held_out = (trainer.expert[expert_order[: args.eval_rows]], draw(rounds[1], args.eval_rows, generator))
+    print(
+        f"{args.run_dir} ({args.checkpoint} checkpoint, {trainer.progress} rounds): "
+        f"{trainer.expert.numel()} expert rows, {rounds[0].numel()} policy rows per round; "
+        f"chance BCE {CHANCE_BCE:.3f}"
+    )
 
     def report(label: str, result: dict[str, float], baseline: dict[str, float]) -> None:
         ratio = (CHANCE_BCE - result["bce"]) / max(CHANCE_BCE - baseline["bce"], 1e-9)
-        print(f"{label:>22}: accuracy {100 * result['accuracy']:5.1f}%  BCE {result['bce']:.3f}  "
-              f"logit expert {result['expert_logit']:+.2f} policy {result['policy_logit']:+.2f}  "
-              f"separation from chance {ratio:.1f}x the run's")
+        print(
+            f"{label:>22}: accuracy {100 * result['accuracy']:5.1f}%  BCE {result['bce']:.3f}  "
+            f"logit expert {result['expert_logit']:+.2f} policy {result['policy_logit']:+.2f}  "
+            f"separation from chance {ratio:.1f}x the run's"
+        )
 
     baseline = score(trainer.losses.discriminator, *held_out)
     report("as the run left it", baseline, baseline)
@@ -99,8 +108,7 @@ def main() -> None:
     optimizer = torch.optim.Adam(loss.parameters(), lr=lr)
     batch_size = int(cfg.algo.discriminator_batch_size)
     for step in range(1, max(args.steps) + 1):
-        batch = gail_discriminator_batch(loss, draw(expert_train, batch_size, generator),
-                                         draw(rounds[0], batch_size, generator))
+        batch = gail_discriminator_batch(loss, draw(expert_train, batch_size, generator), draw(rounds[0], batch_size, generator))
         optimizer.zero_grad(set_to_none=True)
         loss(batch)["loss"].backward()
         optimizer.step()

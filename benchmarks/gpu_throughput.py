@@ -54,35 +54,48 @@ from torchrl_causal.trainers.update import ActorCriticUpdate
 OBSERVATION_DIM, ACTION_DIM, HIDDEN, BLOCKS, BATCH = 128, 8, 256, 3, 256
 BASELINE = "SACLoss (TorchRL)"
 LOSSES: dict[str, Callable] = {
-    BASELINE: lambda actor, critic: SACLoss(actor, critic, loss_function="l2", min_alpha=ALPHA_CLAMP[0],
-                                            max_alpha=ALPHA_CLAMP[1]),
+    BASELINE: lambda actor, critic: SACLoss(actor, critic, loss_function="l2", min_alpha=ALPHA_CLAMP[0], max_alpha=ALPHA_CLAMP[1]),
     "SQILLoss": lambda actor, critic: SQILLoss(actor, critic),
     "IQLearnLoss K=16": lambda actor, critic: IQLearnLoss(actor, critic, num_value_samples=16),
     "IQLearnLoss K=1": lambda actor, critic: IQLearnLoss(actor, critic, num_value_samples=1),
     # +recipe=goal_valued_bc_anchored's loss options (the warm start runs before training).
     "SQILLoss recipe": lambda actor, critic: SQILLoss(actor, critic, goal_value="expert", bc_weight=0.4),
-    "IQLearnLoss K=16 recipe": lambda actor, critic: IQLearnLoss(actor, critic, num_value_samples=16,
-                                                                 goal_value="expert", bc_weight=0.4),
+    "IQLearnLoss K=16 recipe": lambda actor, critic: IQLearnLoss(actor, critic, num_value_samples=16, goal_value="expert", bc_weight=0.4),
 }
-TARGETS = {("cuda", "SQILLoss"): ("updates/s", 300.0), ("cpu", "IQLearnLoss K=16"): ("ratio", 0.6),
-           ("cuda", "IQLearnLoss K=16"): ("ratio", 0.9)}
+TARGETS = {
+    ("cuda", "SQILLoss"): ("updates/s", 300.0),
+    ("cpu", "IQLearnLoss K=16"): ("ratio", 0.6),
+    ("cuda", "IQLearnLoss K=16"): ("ratio", 0.9),
+}
 
 
 def make_batch(device: torch.device, generator: torch.Generator, observation_dim: int = OBSERVATION_DIM) -> TensorDict:
     expert = (torch.arange(BATCH) < BATCH // 2).unsqueeze(-1)
-    return TensorDict({
-        "observation": torch.randn(BATCH, observation_dim, generator=generator),
-        "action": torch.rand(BATCH, ACTION_DIM, generator=generator) * 2 - 1,
-        "expert": expert,
-        "next": {"observation": torch.randn(BATCH, observation_dim, generator=generator),
-                 "reward": expert.float(),  # read by plain SACLoss only
-                 "done": torch.zeros(BATCH, 1, dtype=torch.bool),
-                 "terminated": torch.zeros(BATCH, 1, dtype=torch.bool)},
-    }, [BATCH]).to(device)
+    return TensorDict(
+        {
+            "observation": torch.randn(BATCH, observation_dim, generator=generator),
+            "action": torch.rand(BATCH, ACTION_DIM, generator=generator) * 2 - 1,
+            "expert": expert,
+            "next": {
+                "observation": torch.randn(BATCH, observation_dim, generator=generator),
+                "reward": expert.float(),  # read by plain SACLoss only
+                "done": torch.zeros(BATCH, 1, dtype=torch.bool),
+                "terminated": torch.zeros(BATCH, 1, dtype=torch.bool),
+            },
+        },
+        [BATCH],
+    ).to(device)
 
 
-def make_update(name: str, device: torch.device, compile: bool, *, observation_dim: int = OBSERVATION_DIM,
-                hidden: int = HIDDEN, num_blocks: int = BLOCKS) -> ActorCriticUpdate:
+def make_update(
+    name: str,
+    device: torch.device,
+    compile: bool,
+    *,
+    observation_dim: int = OBSERVATION_DIM,
+    hidden: int = HIDDEN,
+    num_blocks: int = BLOCKS,
+) -> ActorCriticUpdate:
     torch.manual_seed(0)
     spec = Bounded(-1.0, 1.0, shape=(ACTION_DIM,))
     actor = make_tanh_gaussian_actor(observation_dim, spec, hidden=hidden, num_blocks=num_blocks, dropout=0.05)
@@ -90,10 +103,17 @@ def make_update(name: str, device: torch.device, compile: bool, *, observation_d
     loss = LOSSES[name](actor.to(device), critic.to(device))
     loss.make_value_estimator(gamma=0.99)
     adam = partial(torch.optim.Adam, lr=3e-4)
-    return ActorCriticUpdate(loss.to(device), actor_optimizer=adam, critic_optimizer=adam, alpha_optimizer=adam,
-                             target_update=partial(SoftUpdate, tau=0.005), max_grad_norm=1.0,
-                             critic_scheduler=torch.optim.lr_scheduler.CosineAnnealingLR, cosine_updates=500_000,
-                             compile=compile)
+    return ActorCriticUpdate(
+        loss.to(device),
+        actor_optimizer=adam,
+        critic_optimizer=adam,
+        alpha_optimizer=adam,
+        target_update=partial(SoftUpdate, tau=0.005),
+        max_grad_norm=1.0,
+        critic_scheduler=torch.optim.lr_scheduler.CosineAnnealingLR,
+        cosine_updates=500_000,
+        compile=compile,
+    )
 
 
 def timed_rate(update: ActorCriticUpdate, batches: list[TensorDict], device: torch.device, clock: str) -> float:
@@ -120,8 +140,9 @@ def syncs_per_update(update: ActorCriticUpdate, batch: TensorDict, count: int = 
     return sum("synchronizing" in str(w.message) for w in caught) / count
 
 
-def update_rates(device: torch.device, losses: list[str], compile: bool, rounds: int, per_round: int, warmup: int,
-                 clock: str) -> dict[str, dict[str, float]]:
+def update_rates(
+    device: torch.device, losses: list[str], compile: bool, rounds: int, per_round: int, warmup: int, clock: str
+) -> dict[str, dict[str, float]]:
     generator = torch.Generator().manual_seed(0)
     batches = [make_batch(device, generator) for _ in range(per_round)]
     variants = [(name, False) for name in losses] + ([(name, True) for name in losses] if compile else [])
@@ -135,14 +156,16 @@ def update_rates(device: torch.device, losses: list[str], compile: bool, rounds:
     rates: dict[str, list[float]] = {label: [] for label in updates}
     labels = list(updates)
     for r in range(rounds):
-        for label in labels[r % len(labels):] + labels[: r % len(labels)]:
+        for label in labels[r % len(labels) :] + labels[: r % len(labels)]:
             rates[label].append(timed_rate(updates[label], batches, device, clock))
-        print(f"[{device}] round {r + 1}/{rounds}: "
-              + ", ".join(f"{label} {values[-1]:.1f}/s" for label, values in rates.items()), flush=True)
+        print(
+            f"[{device}] round {r + 1}/{rounds}: " + ", ".join(f"{label} {values[-1]:.1f}/s" for label, values in rates.items()), flush=True
+        )
     baseline = rates[BASELINE]
-    out = {label: {"rate": statistics.median(values),
-                   "ratio": statistics.median(v / b for v, b in zip(values, baseline))}
-           for label, values in rates.items()}
+    out = {
+        label: {"rate": statistics.median(values), "ratio": statistics.median(v / b for v, b in zip(values, baseline))}
+        for label, values in rates.items()
+    }
     if device.type == "cuda":
         for label, update in updates.items():
             out[label]["syncs"] = syncs_per_update(update, batches[0])
@@ -152,19 +175,33 @@ def update_rates(device: torch.device, losses: list[str], compile: bool, rounds:
 def collector_rate(device: torch.device, workers: int, num_envs: int, frames: int, batches: int) -> float:
     """Env steps per wall second of the off-policy trainer's collector on AntMaze-medium."""
     with tempfile.TemporaryDirectory() as root:
-        cfg = compose_config(["env=antmaze_medium", "scale=paper", "algo=sqil", f"run_root={root}",
-                              f"algo.num_envs={num_envs}", f"collector_workers={workers}"])
+        cfg = compose_config(
+            [
+                "env=antmaze_medium",
+                "scale=paper",
+                "algo=sqil",
+                f"run_root={root}",
+                f"algo.num_envs={num_envs}",
+                f"collector_workers={workers}",
+            ]
+        )
         window = make_window(cfg)
         env = make_imitator_env(cfg, window, "train", num_envs // workers, 0)
         policy = make_policy(cfg, env).to(device)
         devices = dict(env_device=CPU, policy_device=device, storing_device=device)
         if workers == 1:
-            collector = Collector(env, policy, frames_per_batch=frames, total_frames=-1,
-                                  auto_register_policy_transforms=False, **devices)
+            collector = Collector(env, policy, frames_per_batch=frames, total_frames=-1, auto_register_policy_transforms=False, **devices)
         else:
             make = partial(make_imitator_env, cfg, window, "train", num_envs // workers, 0)
-            collector = MultiSyncCollector([make] * workers, policy, frames_per_batch=frames, total_frames=-1,
-                                           cat_results="stack", auto_register_policy_transforms=False, **devices)
+            collector = MultiSyncCollector(
+                [make] * workers,
+                policy,
+                frames_per_batch=frames,
+                total_frames=-1,
+                cat_results="stack",
+                auto_register_policy_transforms=False,
+                **devices,
+            )
         collector.set_seed(0)
         iterator = iter(collector)
         next(iterator)  # warm-up: worker start, first reset
@@ -177,8 +214,10 @@ def collector_rate(device: torch.device, workers: int, num_envs: int, frames: in
 
 
 def print_updates(results: dict[str, dict[str, dict[str, float]]]) -> None:
-    print(f"\n### Updates per second, paper networks (obs {OBSERVATION_DIM}, act {ACTION_DIM}, width {HIDDEN}, "
-          f"{BLOCKS} blocks, batch {BATCH})\n")
+    print(
+        f"\n### Updates per second, paper networks (obs {OBSERVATION_DIM}, act {ACTION_DIM}, width {HIDDEN}, "
+        f"{BLOCKS} blocks, batch {BATCH})\n"
+    )
     devices = list(results)
     header = "| loss | " + " | ".join(f"{d} updates/s | {d} ratio vs SACLoss" for d in devices)
     if "cpu" in results and len(devices) > 1:
@@ -193,8 +232,13 @@ def print_updates(results: dict[str, dict[str, dict[str, float]]]) -> None:
             row = results[device].get(label)
             cells += ["—", "—"] if row is None else [f"{row['rate']:.1f}", f"{row['ratio']:.3f}"]
         if "cpu" in results and len(devices) > 1:
-            cells += [f"{results[d][label]['rate'] / results['cpu'][label]['rate']:.1f}×"
-                      if label in results[d] and label in results["cpu"] else "—" for d in devices if d != "cpu"]
+            cells += [
+                f"{results[d][label]['rate'] / results['cpu'][label]['rate']:.1f}×"
+                if label in results[d] and label in results["cpu"]
+                else "—"
+                for d in devices
+                if d != "cpu"
+            ]
         if "cuda" in results:
             cells.append(f"{results['cuda'][label]['syncs']:.1f}" if label in results["cuda"] else "—")
         print(f"| {label} | " + " | ".join(cells) + " |")
@@ -202,19 +246,25 @@ def print_updates(results: dict[str, dict[str, dict[str, float]]]) -> None:
     for (device, label), (kind, target) in TARGETS.items():
         if device in results and label in results[device]:
             value = results[device][label]["rate" if kind == "updates/s" else "ratio"]
-            print(f"- target {label} on {device}: {kind} ≥ {target:g}: {value:.3g} "
-                  f"({'met' if value >= target else 'MISSED'})")
+            print(f"- target {label} on {device}: {kind} ≥ {target:g}: {value:.3g} ({'met' if value >= target else 'MISSED'})")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--part", choices=["updates", "collector", "both"], default="both")
-    parser.add_argument("--devices", nargs="+", default=["cpu", "cuda"],
-                        help="devices to measure; one this machine lacks is reported as unmeasured")
-    parser.add_argument("--compile-on", nargs="*", default=[], metavar="DEVICE",
-                        help="devices on which each loss is also timed with compile=True")
-    parser.add_argument("--losses", nargs="+", choices=list(LOSSES), default=list(LOSSES),
-                        help=f"losses to time ({BASELINE!r}, the baseline, is always timed)")
+    parser.add_argument(
+        "--devices", nargs="+", default=["cpu", "cuda"], help="devices to measure; one this machine lacks is reported as unmeasured"
+    )
+    parser.add_argument(
+        "--compile-on", nargs="*", default=[], metavar="DEVICE", help="devices on which each loss is also timed with compile=True"
+    )
+    parser.add_argument(
+        "--losses",
+        nargs="+",
+        choices=list(LOSSES),
+        default=list(LOSSES),
+        help=f"losses to time ({BASELINE!r}, the baseline, is always timed)",
+    )
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--updates", type=int, default=5, help="timed updates per variant per round (CPU)")
     parser.add_argument("--cuda-updates", type=int, default=200, help="timed updates per variant per round (CUDA)")
@@ -228,8 +278,10 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     warnings.filterwarnings("ignore", category=UserWarning)
-    print(f"torch {torch.__version__}, threads {torch.get_num_threads()}, CUDA "
-          f"{torch.cuda.get_device_name(0) if torch.cuda.is_available() else 'unavailable'}")
+    print(
+        f"torch {torch.__version__}, threads {torch.get_num_threads()}, CUDA "
+        f"{torch.cuda.get_device_name(0) if torch.cuda.is_available() else 'unavailable'}"
+    )
     devices = {}
     for name in args.devices:
         try:
@@ -238,10 +290,18 @@ def main() -> None:
             print(f"- {name}: unmeasured ({err})")
     if args.part in ("updates", "both"):
         losses = [BASELINE, *(name for name in args.losses if name != BASELINE)]
-        results = {name: update_rates(device, losses, name in args.compile_on, args.rounds,
-                                      args.cuda_updates if device.type == "cuda" else args.updates, args.warmup,
-                                      args.clock)
-                   for name, device in devices.items()}
+        results = {
+            name: update_rates(
+                device,
+                losses,
+                name in args.compile_on,
+                args.rounds,
+                args.cuda_updates if device.type == "cuda" else args.updates,
+                args.warmup,
+                args.clock,
+            )
+            for name, device in devices.items()
+        }
         if results:
             print_updates(results)
     if args.part in ("collector", "both"):

@@ -71,6 +71,7 @@ def materialised(make_loss):
     def make(actor, qvalue):
         qvalue.module = Materialised(qvalue.module)
         return make_loss(actor, qvalue)
+
     return make
 
 
@@ -103,9 +104,7 @@ class Trainer:
     def __init__(self, name: str, make_loss, config: Config, seed: int) -> None:
         torch.manual_seed(seed)
         spec = Bounded(-1.0, 1.0, shape=(config.action_dim,))
-        actor = make_tanh_gaussian_actor(
-            config.observation_dim, spec, hidden=config.hidden, num_blocks=config.num_blocks, dropout=0.05
-        )
+        actor = make_tanh_gaussian_actor(config.observation_dim, spec, hidden=config.hidden, num_blocks=config.num_blocks, dropout=0.05)
         qvalue = make_qvalue_network(config.observation_dim, spec, hidden=config.hidden, num_blocks=config.num_blocks)
         self.name = name
         self.loss = make_loss(actor, qvalue)
@@ -166,8 +165,7 @@ def run(config: Config, rounds: int, warmup: int, clock) -> list[tuple[str, floa
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--config", choices=[*CONFIGS, "both", "all"], default="both",
-                        help="both: paper and small; all: every config")
+    parser.add_argument("--config", choices=[*CONFIGS, "both", "all"], default="both", help="both: paper and small; all: every config")
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads (default 1)")
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--warmup", type=int, default=3)

@@ -36,13 +36,17 @@ def main() -> None:
     hidden, blocks = (int(x) for x in args.size.split("x"))
     cpu, generator = torch.device("cpu"), torch.Generator().manual_seed(0)
     batches = [make_batch(cpu, generator, ANTMAZE_WINDOW_DIM) for _ in range(args.updates)]
-    print(f"Updates per CPU-second, {ANTMAZE_WINDOW_DIM}-dim input, batch 256, {args.size} networks, 1 thread, "
-          f"{'compiled' if args.compile else 'eager'}, {args.rounds} alternating rounds of {args.updates} updates")
+    print(
+        f"Updates per CPU-second, {ANTMAZE_WINDOW_DIM}-dim input, batch 256, {args.size} networks, 1 thread, "
+        f"{'compiled' if args.compile else 'eager'}, {args.rounds} alternating rounds of {args.updates} updates"
+    )
     print("| loss | plain updates/s | recipe updates/s | recipe / plain |")
     print("|---|---|---|---|")
     for plain in args.losses:
-        updates = {name: make_update(name, cpu, args.compile, observation_dim=ANTMAZE_WINDOW_DIM, hidden=hidden,
-                                     num_blocks=blocks) for name in (plain, PAIRS[plain])}
+        updates = {
+            name: make_update(name, cpu, args.compile, observation_dim=ANTMAZE_WINDOW_DIM, hidden=hidden, num_blocks=blocks)
+            for name in (plain, PAIRS[plain])
+        }
         for update in updates.values():
             timed_rate(update, batches[:3], cpu, "cpu")  # warm-up (and compilation)
         rates = {name: [] for name in updates}
@@ -50,8 +54,9 @@ def main() -> None:
             for name, update in updates.items():
                 rates[name].append(timed_rate(update, batches, cpu, "cpu"))
         ratio = statistics.median(r / p for r, p in zip(rates[PAIRS[plain]], rates[plain]))
-        print(f"| {plain} | {statistics.median(rates[plain]):.1f} | {statistics.median(rates[PAIRS[plain]]):.1f} "
-              f"| {ratio:.2f} |", flush=True)
+        print(
+            f"| {plain} | {statistics.median(rates[plain]):.1f} | {statistics.median(rates[PAIRS[plain]]):.1f} | {ratio:.2f} |", flush=True
+        )
 
 
 if __name__ == "__main__":

@@ -135,8 +135,7 @@ def stored_transitions(n: int, seed: int = 0) -> TensorDict:
     state = {name: torch.randn(n, dim, generator=generator) for name, dim in STATE.items()}
     next_state = {name: torch.roll(value, -1, 0) for name, value in state.items()}
     return TensorDict(
-        {**state, "action": torch.rand(n, ACTION_DIM, generator=generator), "is_init": is_init,
-         "next": {**next_state, "done": done}},
+        {**state, "action": torch.rand(n, ACTION_DIM, generator=generator), "is_init": is_init, "next": {**next_state, "done": done}},
         batch_size=[n],
     )
 
@@ -168,9 +167,7 @@ def main() -> None:
                 "bare": AntLayoutEnv(batch),
                 "empty": TransformedEnv(AntLayoutEnv(batch)),
                 "ours": TransformedEnv(AntLayoutEnv(batch), CausalWindowTransform(window)),
-                "catframes": TransformedEnv(
-                    AntLayoutEnv(batch), CatFrames(N=args.k + 1, dim=-1, in_keys=list(STATE), padding="constant")
-                ),
+                "catframes": TransformedEnv(AntLayoutEnv(batch), CatFrames(N=args.k + 1, dim=-1, in_keys=list(STATE), padding="constant")),
             },
             args.steps,
             args.repeats,
@@ -188,9 +185,7 @@ def main() -> None:
     transform = CausalWindowTransform(window)
     features = transform.encode_trajectories(data[:10])["observation"].shape[-1]
     state_keys = list(STATE)
-    catframes = CatFrames(
-        N=args.k + 1, dim=-1, in_keys=state_keys + [("next", key) for key in state_keys], padding="constant"
-    )
+    catframes = CatFrames(N=args.k + 1, dim=-1, in_keys=state_keys + [("next", key) for key in state_keys], padding="constant")
     timed = {
         # allocating + zero-filling the two outputs: the memory floor of any encoder
         "memory floor (zeros, 2 outputs)": lambda: (
@@ -211,8 +206,10 @@ def main() -> None:
             del result
             if wall < best[name][0]:
                 best[name] = (wall, after.user - before.user, after.system - before.system)
-    print(f"\noffline, {args.transitions:,} transitions, {features} features, {torch.get_num_threads()} torch thread(s), "
-          "best of 2 interleaved rounds:")
+    print(
+        f"\noffline, {args.transitions:,} transitions, {features} features, {torch.get_num_threads()} torch thread(s), "
+        "best of 2 interleaved rounds:"
+    )
     print("\n| | wall s | user CPU s | system CPU s |\n|---|---|---|---|")
     for name, (wall, user, system) in best.items():
         print(f"| {name} | {wall:.2f} | {user:.2f} | {system:.2f} |")

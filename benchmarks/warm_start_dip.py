@@ -64,8 +64,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     torch.manual_seed(0)
-    cfg = compose_config([*args.overrides, f"demos.path={args.demos}", f"run_root={args.run_root}",
-                          "progress_bar=false"])
+    cfg = compose_config([*args.overrides, f"demos.path={args.demos}", f"run_root={args.run_root}", "progress_bar=false"])
     if not cfg.algo.get("warm_start"):
         parser.error("the overrides need algo.warm_start (e.g. +recipe=goal_valued_bc_anchored)")
     window = make_window(cfg)
@@ -75,15 +74,17 @@ def main() -> None:
     start = time.perf_counter()
     while trainer.update.updates == 0:  # behaviour cloning, warm-up steps, critic fit, first updates
         trainer.train_step()
-    print(f"{' '.join(args.overrides)}: warm start done in {time.perf_counter() - start:.0f} s "
-          f"({trainer.progress} env steps, {trainer.update.updates} joint updates)", flush=True)
+    print(
+        f"{' '.join(args.overrides)}: warm start done in {time.perf_counter() - start:.0f} s "
+        f"({trainer.progress} env steps, {trainer.update.updates} joint updates)",
+        flush=True,
+    )
     loss, update = trainer.loss, trainer.update
     snapshot = copy.deepcopy(loss.state_dict()), copy.deepcopy(update.state_dict())
     fixed = [trainer.sample_batch() for _ in range(20)]
     reference = deterministic_actions(trainer, fixed)
     rows = [(batch["expert"].squeeze(-1), ~batch["expert"].squeeze(-1)) for batch in fixed]
-    print(f"| variant | success ({args.episodes} episodes) | / critics_only | action move, expert rows (RMS) "
-          f"| policy rows | seconds |")
+    print(f"| variant | success ({args.episodes} episodes) | / critics_only | action move, expert rows (RMS) | policy rows | seconds |")
     print("|---|---|---|---|---|---|")
     baseline = None
     for name in args.variants:
@@ -98,15 +99,13 @@ def main() -> None:
         for _ in range(args.updates):
             (update if actor_moves else update.critic_step)(trainer.sample_batch())
         seconds = time.perf_counter() - start
-        moved = [(now - before).pow(2).mean(-1).sqrt() for now, before in zip(deterministic_actions(trainer, fixed),
-                                                                            reference)]
+        moved = [(now - before).pow(2).mean(-1).sqrt() for now, before in zip(deterministic_actions(trainer, fixed), reference)]
         expert_move = torch.cat([m[e] for m, (e, _) in zip(moved, rows)]).mean().item()
         policy_move = torch.cat([m[p] for m, (_, p) in zip(moved, rows)]).mean().item()
         success = evaluator.evaluate(trainer.policy, "train", args.episodes, 123).success_rate
         baseline = success if name == "critics_only" else baseline
         ratio = f"{success / baseline:.2f}" if baseline else "n/a"
-        print(f"| {name} | {100 * success:.0f}% | {ratio} | {expert_move:.3f} | {policy_move:.3f} | {seconds:.0f} |",
-              flush=True)
+        print(f"| {name} | {100 * success:.0f}% | {ratio} | {expert_move:.3f} | {policy_move:.3f} | {seconds:.0f} |", flush=True)
     trainer.close()
 
 

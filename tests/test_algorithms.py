@@ -13,8 +13,7 @@ from torchrl_causal.experiment.run_directory import run_label
 
 ROW_VARIANTS = [
     Row(entry.name, causal, window_matched, drop)
-    for entry, causal, window_matched, drop in itertools.product(ALGORITHMS, (False, True), (False, True),
-                                                                 ((), ("X",), ("W", "X")))
+    for entry, causal, window_matched, drop in itertools.product(ALGORITHMS, (False, True), (False, True), ((), ("X",), ("W", "X")))
     if entry.name != "expert" and not (causal and window_matched)
 ]
 
@@ -29,8 +28,17 @@ def test_a_row_is_parsed_back_from_its_name_and_run_label_agrees(row: Row) -> No
 def test_headers_are_the_papers() -> None:
     # Table 1's headers as the paper prints them, and the two rows it lacks.
     assert [display_name(name) for name in TABLE1_ALGORITHMS] == [
-        "Expert", "C-BC", "C-GAIL", "C-SQIL", "C-IQ-Learn", "BC", "GAIL", "SQIL", "IQ-Learn"]
-    assert [row.label for row in ROWS[len(TABLE1_ROWS):]] == ["C-IQ-Learn (Garg et al.)", "SQIL (window-matched)"]
+        "Expert",
+        "C-BC",
+        "C-GAIL",
+        "C-SQIL",
+        "C-IQ-Learn",
+        "BC",
+        "GAIL",
+        "SQIL",
+        "IQ-Learn",
+    ]
+    assert [row.label for row in ROWS[len(TABLE1_ROWS) :]] == ["C-IQ-Learn (Garg et al.)", "SQIL (window-matched)"]
     assert display_name("c_bc_no-W-X") == "C-BC (no W, X)" and display_name("ppo") == "ppo"
 
 

@@ -65,14 +65,12 @@ def test_locomotion_env_specs_reward_and_termination():
     check_env_specs(env)
     rollout = env.rollout(20, break_when_any_done=False)
     velocity = (rollout["next", "xy"] - rollout["xy"]) / 0.1
-    torch.testing.assert_close(rollout["next", "reward"], (velocity * rollout["direction"]).sum(-1, keepdim=True),
-                               atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(rollout["next", "reward"], (velocity * rollout["direction"]).sum(-1, keepdim=True), atol=1e-5, rtol=1e-5)
     direction = rollout["direction"]
     torch.testing.assert_close(direction.norm(dim=-1), torch.ones(3, 20))
     changes = (direction[:, 1:] != direction[:, :-1]).any(-1)
     assert changes.nonzero()[:, 1].unique().tolist() == [6, 13]  # redrawn at steps 7 and 14
     assert rollout["next", "truncated"][:, -1].all()
-
 
 
 def test_shipped_locomotion_weights_walk_in_every_direction():

@@ -14,16 +14,38 @@ from pathlib import Path
 
 import pytest
 
-TINY = ["env=rovermaze_u", "env.horizon=40", "window.k=2", "algo=sqil", "threads=1", "demos.episodes=6",
-        "eval.episodes=4", "eval.num_envs=4", "eval.final_episodes=8", "algo.actor.hidden=16", "algo.actor.num_blocks=1",
-        "algo.critic.hidden=16", "algo.critic.num_blocks=1", "algo.num_envs=2", "algo.frames_per_batch=40",
-        "algo.random_steps=80", "algo.batch_size=32", "algo.buffer_size=100000"]
+TINY = [
+    "env=rovermaze_u",
+    "env.horizon=40",
+    "window.k=2",
+    "algo=sqil",
+    "threads=1",
+    "demos.episodes=6",
+    "eval.episodes=4",
+    "eval.num_envs=4",
+    "eval.final_episodes=8",
+    "algo.actor.hidden=16",
+    "algo.actor.num_blocks=1",
+    "algo.critic.hidden=16",
+    "algo.critic.num_blocks=1",
+    "algo.num_envs=2",
+    "algo.frames_per_batch=40",
+    "algo.random_steps=80",
+    "algo.batch_size=32",
+    "algo.buffer_size=100000",
+]
 
 
 def _train(root: Path, *overrides: str, **kwargs) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "torchrl_causal.train", f"run_root={root}", *TINY, *overrides],
-                            cwd=root.parent, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "OMP_NUM_THREADS": "1"}, **kwargs)
+    return subprocess.Popen(
+        [sys.executable, "-m", "torchrl_causal.train", f"run_root={root}", *TINY, *overrides],
+        cwd=root.parent,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+        **kwargs,
+    )
 
 
 def test_an_out_of_range_value_stops_with_one_line_and_no_run_directory(tmp_path: Path) -> None:

@@ -23,48 +23,124 @@ from torchrl_causal.experiment import CONFIG_DIR, ConfigValueError, compose_conf
 from torchrl_causal.experiment.schema import ALGO_SCHEMAS, AlgoConfig, algo_schema
 from torchrl_causal.trainers import Trainer
 
-ENVS = ("rovermaze_u", "rovermaze_medium", "rovermaze_large", "route_choice",
-        "antmaze_medium", "antmaze_large", "humanoidmaze_medium", "humanoidmaze_large")
+ENVS = (
+    "rovermaze_u",
+    "rovermaze_medium",
+    "rovermaze_large",
+    "route_choice",
+    "antmaze_medium",
+    "antmaze_large",
+    "humanoidmaze_medium",
+    "humanoidmaze_large",
+)
 ALGOS = ("bc", "gail", "sqil", "iq_learn", "iq_learn_garg", "expert")
 
 # Appendix E, tab:hparams, transcribed: (key in the algo config, value) per algorithm,
 # shared by both environment families.
 PAPER_SHARED = {
-    "bc": {"actor.hidden": 256, "actor.num_blocks": 4, "actor.dropout": 0.0, "optimizer.lr": 3e-4, "batch_size": 2048,
-           "val_fraction": 0.2},
-    "gail": {"actor.hidden": 256, "actor.num_blocks": 3, "actor.dropout": 0.0,  # 0.05 in the paper: see gail.yaml
-             "actor_optimizer.lr": 1e-4,
-             "critic_optimizer.lr": 3e-4, "batch_size": 1024, "loss.gamma": 0.99, "max_grad_norm": 0.5,
-             "loss.clip_epsilon": 0.2, "loss.gae_lambda": 0.95, "loss.entropy_coeff": 1e-2, "loss.critic_coeff": 0.5,
-             "loss.normalize_advantage": True, "discriminator_optimizer.lr": 3e-4, "discriminator.dropout": 0.2,
-             "discriminator_epochs": 2,  # "updated 2 times per round": see gail.yaml
-             "discriminator_batch_size": 1024, "loss.gp_lambda": 5.0,
-             "discriminator_scheduler.step_size": 100, "discriminator_scheduler.gamma": 0.5},
-    "sqil": {"actor.hidden": 256, "actor.num_blocks": 3, "actor.dropout": 0.05, "critic.hidden": 256,
-             "critic.num_blocks": 3, "actor_optimizer.lr": 3e-4, "critic_optimizer.lr": 3e-4, "batch_size": 256,
-             "value_estimator.gamma": 0.99, "max_grad_norm": 1.0, "target_update.tau": 0.005,
-             "alpha_optimizer.lr": 3e-4, "loss.target_entropy": "auto", "loss.min_alpha": 0.001,
-             "loss.max_alpha": 0.1, "buffer_size": 1_000_000, "expert_ratio": 0.5, "random_steps": 5000,
-             "total_steps": 2_000_000, "critic_scheduler._target_": "torch.optim.lr_scheduler.CosineAnnealingLR"},
+    "bc": {"actor.hidden": 256, "actor.num_blocks": 4, "actor.dropout": 0.0, "optimizer.lr": 3e-4, "batch_size": 2048, "val_fraction": 0.2},
+    "gail": {
+        "actor.hidden": 256,
+        "actor.num_blocks": 3,
+        "actor.dropout": 0.0,  # 0.05 in the paper: see gail.yaml
+        "actor_optimizer.lr": 1e-4,
+        "critic_optimizer.lr": 3e-4,
+        "batch_size": 1024,
+        "loss.gamma": 0.99,
+        "max_grad_norm": 0.5,
+        "loss.clip_epsilon": 0.2,
+        "loss.gae_lambda": 0.95,
+        "loss.entropy_coeff": 1e-2,
+        "loss.critic_coeff": 0.5,
+        "loss.normalize_advantage": True,
+        "discriminator_optimizer.lr": 3e-4,
+        "discriminator.dropout": 0.2,
+        "discriminator_epochs": 2,  # "updated 2 times per round": see gail.yaml
+        "discriminator_batch_size": 1024,
+        "loss.gp_lambda": 5.0,
+        "discriminator_scheduler.step_size": 100,
+        "discriminator_scheduler.gamma": 0.5,
+    },
+    "sqil": {
+        "actor.hidden": 256,
+        "actor.num_blocks": 3,
+        "actor.dropout": 0.05,
+        "critic.hidden": 256,
+        "critic.num_blocks": 3,
+        "actor_optimizer.lr": 3e-4,
+        "critic_optimizer.lr": 3e-4,
+        "batch_size": 256,
+        "value_estimator.gamma": 0.99,
+        "max_grad_norm": 1.0,
+        "target_update.tau": 0.005,
+        "alpha_optimizer.lr": 3e-4,
+        "loss.target_entropy": "auto",
+        "loss.min_alpha": 0.001,
+        "loss.max_alpha": 0.1,
+        "buffer_size": 1_000_000,
+        "expert_ratio": 0.5,
+        "random_steps": 5000,
+        "total_steps": 2_000_000,
+        "critic_scheduler._target_": "torch.optim.lr_scheduler.CosineAnnealingLR",
+    },
 }
 PAPER_SHARED["iq_learn"] = PAPER_SHARED["sqil"]
 # The per-family entries of tab:hparams (A = AntMaze, H = HumanoidMaze).
 PAPER_FAMILY = {
-    "antmaze_medium": {"k": 10, "utd_ratio": 0.25, "ppo_epochs": 4, "episodes_per_round": 20, "rounds": 500,
-                       "epochs": 100, "patience": 15, "num_value_samples": 16, "horizon": 1000},
-    "antmaze_large": {"k": 10, "utd_ratio": 0.25, "ppo_epochs": 4, "episodes_per_round": 20, "rounds": 500,
-                      "epochs": 100, "patience": 15, "num_value_samples": 16, "horizon": 1000},
-    "humanoidmaze_medium": {"k": 2, "utd_ratio": 0.5, "ppo_epochs": 2, "episodes_per_round": 10, "rounds": 200,
-                            "epochs": 100, "patience": 30, "num_value_samples": 1, "horizon": 2000},
-    "humanoidmaze_large": {"k": 2, "utd_ratio": 0.5, "ppo_epochs": 2, "episodes_per_round": 10, "rounds": 200,
-                           "epochs": 200, "patience": 15, "num_value_samples": 1, "horizon": 2000},
+    "antmaze_medium": {
+        "k": 10,
+        "utd_ratio": 0.25,
+        "ppo_epochs": 4,
+        "episodes_per_round": 20,
+        "rounds": 500,
+        "epochs": 100,
+        "patience": 15,
+        "num_value_samples": 16,
+        "horizon": 1000,
+    },
+    "antmaze_large": {
+        "k": 10,
+        "utd_ratio": 0.25,
+        "ppo_epochs": 4,
+        "episodes_per_round": 20,
+        "rounds": 500,
+        "epochs": 100,
+        "patience": 15,
+        "num_value_samples": 16,
+        "horizon": 1000,
+    },
+    "humanoidmaze_medium": {
+        "k": 2,
+        "utd_ratio": 0.5,
+        "ppo_epochs": 2,
+        "episodes_per_round": 10,
+        "rounds": 200,
+        "epochs": 100,
+        "patience": 30,
+        "num_value_samples": 1,
+        "horizon": 2000,
+    },
+    "humanoidmaze_large": {
+        "k": 2,
+        "utd_ratio": 0.5,
+        "ppo_epochs": 2,
+        "episodes_per_round": 10,
+        "rounds": 200,
+        "epochs": 200,
+        "patience": 15,
+        "num_value_samples": 1,
+        "horizon": 2000,
+    },
 }
-FAMILY_KEYS = {"bc": ("epochs", "patience"), "gail": ("ppo_epochs", "episodes_per_round", "rounds"),
-               "sqil": ("utd_ratio",), "iq_learn": ("utd_ratio", "loss.num_value_samples")}
+FAMILY_KEYS = {
+    "bc": ("epochs", "patience"),
+    "gail": ("ppo_epochs", "episodes_per_round", "rounds"),
+    "sqil": ("utd_ratio",),
+    "iq_learn": ("utd_ratio", "loss.num_value_samples"),
+}
 
 
-GROUPS = {group: sorted(p.stem for p in (CONFIG_DIR / group).glob("*.yaml"))
-          for group in ("env", "algo", "window", "logger", "scale")}
+GROUPS = {group: sorted(p.stem for p in (CONFIG_DIR / group).glob("*.yaml")) for group in ("env", "algo", "window", "logger", "scale")}
 
 
 def _targets(node: Any, where: str = "") -> Iterator[tuple[str, str]]:
@@ -90,8 +166,9 @@ def test_every_group_combination_composes_validates_and_resolves_its_targets(env
         window = GROUPS["window"][index % 2]
         logger = GROUPS["logger"][(index % 2 + index // 2) % 2]  # each algo gets both windows and both loggers
         causal = window != "matched"  # the window-matched baseline is non-causal by definition
-        cfg = compose_config([f"env={env}", f"algo={algo}", f"window={window}", f"logger={logger}", f"scale={scale}",
-                              f"causal={causal}", "seed=4"])
+        cfg = compose_config(
+            [f"env={env}", f"algo={algo}", f"window={window}", f"logger={logger}", f"scale={scale}", f"causal={causal}", "seed=4"]
+        )
         resolved = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
         if resolved["env"]["expert"] is None:  # HumanoidMaze: no expert shipped, so every run is refused
             with pytest.raises(ConfigValueError, match="has no expert"):
@@ -145,12 +222,32 @@ def test_a_value_of_the_wrong_type_fails_at_composition(override: str, exception
 
 @pytest.mark.parametrize(
     "override",
-    ["episodes=0", "eval.episodes=0", "eval.final_episodes=0", "eval.num_envs=0", "demos.episodes=0",
-     "algo.num_envs=0", "algo.batch_size=1", "algo.expert_ratio=1.0", "algo.actor.dropout=1.0",
-     "env.confounding_strength=1.5", "env.confounding_strength=-0.1", "env.horizon=0", "window.k=-1", "threads=0",
-     "algo.loss.target_entropy=high", "log_every=0", "collector_workers=0", "collector_workers=3",
-     "algo.random_steps=5001", "device=cuda:999", "device=gpu", "window.k=1000", "algo.total_steps=5000",
-     "max_memory_gb=0"],
+    [
+        "episodes=0",
+        "eval.episodes=0",
+        "eval.final_episodes=0",
+        "eval.num_envs=0",
+        "demos.episodes=0",
+        "algo.num_envs=0",
+        "algo.batch_size=1",
+        "algo.expert_ratio=1.0",
+        "algo.actor.dropout=1.0",
+        "env.confounding_strength=1.5",
+        "env.confounding_strength=-0.1",
+        "env.horizon=0",
+        "window.k=-1",
+        "threads=0",
+        "algo.loss.target_entropy=high",
+        "log_every=0",
+        "collector_workers=0",
+        "collector_workers=3",
+        "algo.random_steps=5001",
+        "device=cuda:999",
+        "device=gpu",
+        "window.k=1000",
+        "algo.total_steps=5000",
+        "max_memory_gb=0",
+    ],
 )
 def test_an_out_of_range_value_is_refused_by_name(override: str) -> None:
     key = override.split("=")[0]
@@ -162,12 +259,15 @@ def test_an_out_of_range_value_is_refused_by_name(override: str) -> None:
         validate_config(compose_config([override]))
 
 
-@pytest.mark.parametrize("override, named, hint", [
-    ("+windw.k=2", "windw.k", "window.k"),  # Hydra's own suggestion for the typo windw.k=2
-    ("+window.lags=3", "window.lags", None),
-    ("+algo.actor.hiden=3", "algo.actor.hiden", "algo.actor.hidden"),
-    ("+eval.episode=3", "eval.episode", "eval.episodes"),
-])
+@pytest.mark.parametrize(
+    "override, named, hint",
+    [
+        ("+windw.k=2", "windw.k", "window.k"),  # Hydra's own suggestion for the typo windw.k=2
+        ("+window.lags=3", "window.lags", None),
+        ("+algo.actor.hiden=3", "algo.actor.hiden", "algo.actor.hidden"),
+        ("+eval.episode=3", "eval.episode", "eval.episodes"),
+    ],
+)
 def test_a_key_added_with_plus_is_refused_like_an_unknown_key(override: str, named: str, hint: str | None) -> None:
     cfg = compose_config(["algo=sqil", override])  # `+` gets past composition ...
     with pytest.raises(ConfigValueError, match=rf"config key {re.escape(named)} is unknown") as error:
@@ -191,8 +291,10 @@ def test_sizes_must_agree_and_a_budget_must_outlast_the_warm_up() -> None:
 
 
 def test_enums_of_the_losses_name_their_options() -> None:
-    for algo, override, options in (("iq_learn", "algo.loss.variant=online", "paper, iq_learn"),
-                                    ("gail", "algo.loss.reward=negative", "logit, positive")):
+    for algo, override, options in (
+        ("iq_learn", "algo.loss.variant=online", "paper, iq_learn"),
+        ("gail", "algo.loss.reward=negative", "logit, positive"),
+    ):
         with pytest.raises(ConfigCompositionException) as error:
             compose_config([f"algo={algo}", override])
         assert options in str(error.value.__cause__)
@@ -234,16 +336,28 @@ def test_scale_cpu_shrinks_budgets_not_objectives() -> None:
         paper = compose_config(["env=rovermaze_medium", f"algo={algo}", "scale=paper"]).algo
         cpu = compose_config(["env=rovermaze_medium", f"algo={algo}", "scale=cpu"]).algo
         assert cpu.actor.hidden < paper.actor.hidden
-        for key in ("value_estimator.gamma", "loss.gamma", "target_update.tau", "loss.min_alpha", "loss.max_alpha",
-                    "expert_ratio", "loss.clip_epsilon", "loss.gp_lambda", "val_fraction", "loss.delta", "utd_ratio",
-                    "loss.num_value_samples"):
+        for key in (
+            "value_estimator.gamma",
+            "loss.gamma",
+            "target_update.tau",
+            "loss.min_alpha",
+            "loss.max_alpha",
+            "expert_ratio",
+            "loss.clip_epsilon",
+            "loss.gp_lambda",
+            "val_fraction",
+            "loss.delta",
+            "utd_ratio",
+            "loss.num_value_samples",
+        ):
             assert OmegaConf.select(cpu, key) == OmegaConf.select(paper, key), (algo, key)
     assert compose_config(["algo=sqil"]).algo.total_steps < 2_000_000
 
 
 def test_overrides_reach_env_window_and_run_dir() -> None:
-    cfg = compose_config(["env=rovermaze_large", "algo=iq_learn", "causal=true", "window.k=2", "seed=1",
-                          "env.horizon=500", "env.confounding_strength=0.5"])
+    cfg = compose_config(
+        ["env=rovermaze_large", "algo=iq_learn", "causal=true", "window.k=2", "seed=1", "env.horizon=500", "env.confounding_strength=0.5"]
+    )
     assert cfg.run_name == "rovermaze_large/h500-cs0.5-k2/c_iq_learn/seed1"
     assert "h500-cs0.5" in cfg.demos.path
     from torchrl_causal.experiment.builders import make_env
@@ -266,8 +380,7 @@ def test_overrides_reach_env_window_and_run_dir() -> None:
 @pytest.mark.parametrize(
     ("experiment", "swept"),
     [
-        ("paper_table", {"row": "expert,c_bc,c_gail,c_sqil,c_iq_learn,bc,gail,sqil,iq_learn,c_iq_learn_garg,sqil_wm",
-                         "seed": "0,1,2"}),
+        ("paper_table", {"row": "expert,c_bc,c_gail,c_sqil,c_iq_learn,bc,gail,sqil,iq_learn,c_iq_learn_garg,sqil_wm", "seed": "0,1,2"}),
         ("antmaze_table", {"row": "expert,c_bc,c_gail,c_sqil,c_iq_learn,bc,gail,sqil,iq_learn", "seed": "0"}),
         ("window_ablation", {"window.k": "0,1,2,5,10,100", "causal": "true"}),
         ("horizon_ablation", {"env.horizon": "500,1000,1500", "env": "antmaze_medium,antmaze_large"}),
@@ -314,7 +427,10 @@ def test_each_table_row_is_the_run_it_names(row: str) -> None:
 def test_entry_point_composes_from_any_directory(tmp_path) -> None:
     out = subprocess.run(
         [sys.executable, "-m", "torchrl_causal.train", "env=route_choice", "algo=gail", "--cfg", "job", "--resolve"],
-        cwd=tmp_path, capture_output=True, text=True, timeout=120,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert out.returncode == 0, out.stderr[-2000:]
     cfg = OmegaConf.create(out.stdout)

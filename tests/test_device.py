@@ -56,8 +56,12 @@ def module_tensors(module: torch.nn.Module) -> dict[str, torch.Tensor]:
 
 def optimizer_tensors(optimizer: torch.optim.Optimizer) -> dict[str, torch.Tensor]:
     # Adam's "step" counter lives on the CPU unless the step is fused or capturable.
-    return {f"{i}.{key}": value for i, state in enumerate(optimizer.state.values())
-            for key, value in state.items() if key != "step" and isinstance(value, torch.Tensor)}
+    return {
+        f"{i}.{key}": value
+        for i, state in enumerate(optimizer.state.values())
+        for key, value in state.items()
+        if key != "step" and isinstance(value, torch.Tensor)
+    }
 
 
 def batch_tensors(batch: TensorDictBase) -> dict[str, torch.Tensor]:
@@ -107,8 +111,13 @@ def test_cli_refuses_a_missing_device_before_hydra_makes_the_run_directory(tmp_p
     root = tmp_path / "runs"
     for mode in ([], ["-m", "seed=0,1"]):
         done = subprocess.run(
-            [sys.executable, "-m", "torchrl_causal.train", *mode, "env=route_choice", "algo=bc", "device=cuda:999",
-             f"run_root={root}"], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=240)
+            [sys.executable, "-m", "torchrl_causal.train", *mode, "env=route_choice", "algo=bc", "device=cuda:999", f"run_root={root}"],
+            capture_output=True,
+            text=True,
+            env=env,
+            cwd=tmp_path,
+            timeout=240,
+        )
         assert done.returncode != 0
         assert "device='cuda:999' cannot be used here" in done.stderr, done.stderr[-2000:]
         assert not root.exists(), sorted(str(p) for p in root.rglob("*"))
@@ -160,8 +169,14 @@ def test_bc_and_gail_placement(tmp_path: Path, device: str) -> None:
     gail = set_up(tiny_config(tmp_path, "rovermaze_u", "gail", True, f"device={device}"))
     gail.train_step()
     assert_on(target, {**module_tensors(gail.losses.policy), **module_tensors(gail.losses.discriminator)})
-    assert_on(target, {**optimizer_tensors(gail.actor_optimizer), **optimizer_tensors(gail.critic_optimizer),
-                       **optimizer_tensors(gail.discriminator_optimizer)})
+    assert_on(
+        target,
+        {
+            **optimizer_tensors(gail.actor_optimizer),
+            **optimizer_tensors(gail.critic_optimizer),
+            **optimizer_tensors(gail.discriminator_optimizer),
+        },
+    )
     assert_on(target, batch_tensors(gail.expert))
     gail.close()
 
@@ -258,26 +273,46 @@ def test_compile_without_a_cxx_compiler_is_refused_before_a_run_directory_exists
 def _iq_learn_update(compile: bool) -> ActorCriticUpdate:
     torch.manual_seed(0)
     spec = Bounded(-1.0, 1.0, shape=(2,))
-    loss = IQLearnLoss(make_tanh_gaussian_actor(3, spec, hidden=16, num_blocks=1, dropout=0.05),
-                       make_qvalue_network(3, spec, hidden=16, num_blocks=1), num_value_samples=2,
-                       goal_value="expert", bc_weight=0.4)  # the recipe's options: they once split the graph
+    loss = IQLearnLoss(
+        make_tanh_gaussian_actor(3, spec, hidden=16, num_blocks=1, dropout=0.05),
+        make_qvalue_network(3, spec, hidden=16, num_blocks=1),
+        num_value_samples=2,
+        goal_value="expert",
+        bc_weight=0.4,
+    )  # the recipe's options: they once split the graph
     loss.make_value_estimator(gamma=0.99)
     adam = partial(torch.optim.Adam, lr=1e-2)
-    return ActorCriticUpdate(loss, actor_optimizer=adam, critic_optimizer=adam, alpha_optimizer=adam,
-                             target_update=partial(SoftUpdate, tau=0.1), max_grad_norm=1.0,
-                             critic_scheduler=torch.optim.lr_scheduler.CosineAnnealingLR, cosine_updates=5,
-                             compile=compile)
+    return ActorCriticUpdate(
+        loss,
+        actor_optimizer=adam,
+        critic_optimizer=adam,
+        alpha_optimizer=adam,
+        target_update=partial(SoftUpdate, tau=0.1),
+        max_grad_norm=1.0,
+        critic_scheduler=torch.optim.lr_scheduler.CosineAnnealingLR,
+        cosine_updates=5,
+        compile=compile,
+    )
 
 
 def _batches(count: int) -> list[TensorDict]:
     generator = torch.Generator().manual_seed(1)
-    return [TensorDict({
-        "observation": torch.randn(8, 3, generator=generator),
-        "action": torch.rand(8, 2, generator=generator) * 2 - 1,
-        "expert": (torch.arange(8) < 4).unsqueeze(-1),
-        "next": {"observation": torch.randn(8, 3, generator=generator),
-                 "done": (torch.arange(8) % 4 == 3).unsqueeze(-1), "terminated": (torch.arange(8) % 4 == 3).unsqueeze(-1)},
-    }, [8]) for _ in range(count)]
+    return [
+        TensorDict(
+            {
+                "observation": torch.randn(8, 3, generator=generator),
+                "action": torch.rand(8, 2, generator=generator) * 2 - 1,
+                "expert": (torch.arange(8) < 4).unsqueeze(-1),
+                "next": {
+                    "observation": torch.randn(8, 3, generator=generator),
+                    "done": (torch.arange(8) % 4 == 3).unsqueeze(-1),
+                    "terminated": (torch.arange(8) % 4 == 3).unsqueeze(-1),
+                },
+            },
+            [8],
+        )
+        for _ in range(count)
+    ]
 
 
 @pytest.mark.skipif(COMPILE_UNAVAILABLE is not None, reason=str(COMPILE_UNAVAILABLE))
@@ -310,8 +345,7 @@ def test_multi_process_collection_uses_the_current_policy(tmp_path: Path) -> Non
     """Two env processes (MultiSyncCollector): each batch holds both workers' envs, the
     random phase is split between them, and after the main process changes the actor the
     workers act with the new weights."""
-    cfg = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "collector_workers=2", "algo.random_steps=40",
-                      "algo.total_steps=120")
+    cfg = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "collector_workers=2", "algo.random_steps=40", "algo.total_steps=120")
     trainer = set_up(cfg)
     trainer.train_step()  # the random phase: one 40-step batch, 20 steps from each worker's env
     assert trainer.progress == 40 and len(trainer.policy_buffer) == 40
@@ -338,9 +372,11 @@ def test_a_run_resolves_its_device_once_for_the_trainer_and_the_evaluator(tmp_pa
 
     calls = {module.__name__: 0 for module in (lifecycle_module, trainer_module, evaluator_module)}
     for module in (lifecycle_module, trainer_module, evaluator_module):
+
         def counting(spec, name=module.__name__):
             calls[name] += 1
             return resolve_device(spec)
+
         monkeypatch.setattr(module, "resolve_device", counting)
     run(tiny_config(tmp_path, "route_choice", "bc", True))  # trains, selects, evaluates both regimes
     assert calls == {lifecycle_module.__name__: 1, trainer_module.__name__: 0, evaluator_module.__name__: 0}

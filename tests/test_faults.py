@@ -43,9 +43,22 @@ import torchrl_causal.cli.status  # noqa: F401
 import torchrl_causal.cli.strength_ablation  # noqa: F401
 import torchrl_causal.cli.train  # noqa: F401
 
-TINY_BC = ["env=rovermaze_u", "env.horizon=40", "window.k=2", "algo=bc", "threads=1", "demos.episodes=6",
-           "eval.episodes=4", "eval.num_envs=4", "eval.final_episodes=8", "algo.actor.hidden=16",
-           "algo.actor.num_blocks=1", "algo.epochs=2", "algo.eval_every=1", "progress_bar=false"]
+TINY_BC = [
+    "env=rovermaze_u",
+    "env.horizon=40",
+    "window.k=2",
+    "algo=bc",
+    "threads=1",
+    "demos.episodes=6",
+    "eval.episodes=4",
+    "eval.num_envs=4",
+    "eval.final_episodes=8",
+    "algo.actor.hidden=16",
+    "algo.actor.num_blocks=1",
+    "algo.epochs=2",
+    "algo.eval_every=1",
+    "progress_bar=false",
+]
 RUN = "rovermaze_u/h40-cs1.0-k2/c_bc/seed0"  # where TINY_BC's run lands below its run root
 MAX_STDERR_LINES = 3
 HYDRA_MAX_STDERR_LINES = 7  # Hydra's own report of an override it refuses: what, where, HYDRA_FULL_ERROR
@@ -101,8 +114,11 @@ class Case:
 def _snapshot(root: Path) -> dict[str, str]:
     """Every path below ``root`` with its content's hash; a run's ``.lock`` aside (each
     attempt writes its pid there, holding it)."""
-    return {str(path.relative_to(root)): hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else "dir"
-            for path in sorted(root.rglob("*")) if path.name != ".lock"}
+    return {
+        str(path.relative_to(root)): hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else "dir"
+        for path in sorted(root.rglob("*"))
+        if path.name != ".lock"
+    }
 
 
 def run_forked(cases: list[Case], parallel: int = 3, timeout_s: float = 120.0) -> dict[str, Outcome]:
@@ -120,8 +136,9 @@ def run_forked(cases: list[Case], parallel: int = 3, timeout_s: float = 120.0) -
             if pid == 0:  # the child never returns into pytest
                 code = 1
                 try:
-                    code = _child(case.module, [a.format(root=case.root) for a in case.argv], case.root,
-                                  out.fileno(), err.fileno(), case.prepare)
+                    code = _child(
+                        case.module, [a.format(root=case.root) for a in case.argv], case.root, out.fileno(), err.fileno(), case.prepare
+                    )
                 finally:
                     try:
                         sys.stdout.flush()
@@ -157,8 +174,9 @@ def _trained_run(cache: Path) -> Path:
     """A finished tiny C-BC run (its run root), trained once per session in a forked child."""
     root = cache / "trained"
     if not (root / RUN / "eval" / "deploy.json").is_file():
-        outcome = run_forked([Case("train", "torchrl_causal.train", [*TINY_BC, f"run_root={root}"], "",
-                                   root=cache)], parallel=1, timeout_s=300)["train"]
+        outcome = run_forked(
+            [Case("train", "torchrl_causal.train", [*TINY_BC, f"run_root={root}"], "", root=cache)], parallel=1, timeout_s=300
+        )["train"]
         assert outcome.code == 0, outcome.stderr[-3000:]
     return root
 
@@ -168,6 +186,7 @@ def _copy_of(trained: Path) -> Callable[[Path], None]:
         shutil.copytree(trained, root, dirs_exist_ok=True)
         config = root / RUN / "config.yaml"  # as if trained here: its run_root, run_dir and demos.path
         config.write_text(config.read_text().replace(str(trained), str(root)))
+
     return setup
 
 
@@ -175,6 +194,7 @@ def _then(first: Callable[[Path], None], change: Callable[[Path], None]) -> Call
     def setup(root: Path) -> None:
         first(root)
         change(root)
+
     return setup
 
 
@@ -182,12 +202,14 @@ def _write(relative: str, data: bytes) -> Callable[[Path], None]:
     def change(root: Path) -> None:
         (root / relative).parent.mkdir(parents=True, exist_ok=True)
         (root / relative).write_bytes(data)
+
     return change
 
 
 def _remove(relative: str) -> Callable[[Path], None]:
     def change(root: Path) -> None:
         (root / relative).unlink()
+
     return change
 
 
@@ -218,19 +240,28 @@ def _cases(trained: Path) -> list[Case]:
         Case("train +typo key", T, [*fresh, "+windw.k=2"], "config key windw.k is unknown"),
         Case("train typo key", T, [*fresh, "windw.k=2"], "windw"),
         Case("train seed not a number", T, [*fresh, "seed=abc"], "seed=abc"),
-        Case("train budget inside warm-up", T, ["run_root={root}/runs", "env=rovermaze_u", "algo=sqil",
-                                                "algo.total_steps=100", "algo.random_steps=512"],
-             "algo.total_steps=100 must be > algo.random_steps=512"),
+        Case(
+            "train budget inside warm-up",
+            T,
+            ["run_root={root}/runs", "env=rovermaze_u", "algo=sqil", "algo.total_steps=100", "algo.random_steps=512"],
+            "algo.total_steps=100 must be > algo.random_steps=512",
+        ),
         Case("train drop unknown variable", T, [*fresh, "window.drop=[Q]"], "window.drop"),
         Case("train zero eval envs", T, [*fresh, "eval.num_envs=0"], "eval.num_envs=0"),
         Case("train memory over limit", T, [*fresh, "max_memory_gb=0.1"], "of memory"),
-        Case("train run_root is a file", T, ["run_root={root}/afile", *TINY_BC], "afile",
-             setup=_write("afile", b"not a folder")),
+        Case("train run_root is a file", T, ["run_root={root}/afile", *TINY_BC], "afile", setup=_write("afile", b"not a folder")),
         Case("train tensorboard missing", T, [*fresh, "logger=tensorboard"], "tensorboard", prepare=_without_tensorboard),
         Case("train demonstrations corrupted", T, [*rerun, "seed=1"], "delete", setup=_then(run, _corrupt_demos)),
-        Case("train checkpoint corrupted", T, rerun, "last.pt",
-             setup=_then(_then(run, _write(f"{RUN}/checkpoints/last.pt", b"garbage")),
-                         _write(f"{RUN}/status.json", b'{"status": "interrupted", "progress": 1, "total": 2}'))),
+        Case(
+            "train checkpoint corrupted",
+            T,
+            rerun,
+            "last.pt",
+            setup=_then(
+                _then(run, _write(f"{RUN}/checkpoints/last.pt", b"garbage")),
+                _write(f"{RUN}/status.json", b'{"status": "interrupted", "progress": 1, "total": 2}'),
+            ),
+        ),
         Case("train status corrupted", T, rerun, "status.json", setup=_then(run, _write(f"{RUN}/status.json", b"{"))),
         Case("train config changed", T, [*rerun, "algo.batch_size=7"], "holds a run of another config", setup=run),
         # ---- evaluate
@@ -238,18 +269,29 @@ def _cases(trained: Path) -> list[Case]:
         Case("evaluate zero episodes", E, [f"run_dir={in_run}", "episodes=0"], "episodes=0", setup=run),
         Case("evaluate seed not a number", E, [f"run_dir={in_run}", "seed=abc"], "seed='abc' must be an integer", setup=run),
         Case("evaluate zero envs", E, [f"run_dir={in_run}", "num_envs=0"], "num_envs=0", setup=run),
-        Case("evaluate strength above one", E, [f"run_dir={in_run}", "confounding_strength=2"], "confounding_strength=2",
-             setup=run),
+        Case("evaluate strength above one", E, [f"run_dir={in_run}", "confounding_strength=2"], "confounding_strength=2", setup=run),
         Case("evaluate missing run", E, ["run_dir={root}/nowhere"], "nowhere"),
         Case("evaluate folder without a run", E, ["run_dir={root}"], "config.yaml", setup=_write("x.txt", b"x")),
-        Case("evaluate best checkpoint corrupted", E, [f"run_dir={in_run}"], "best.pt",
-             setup=_then(run, _write(f"{RUN}/checkpoints/best.pt", b"garbage"))),
-        Case("evaluate best checkpoint missing", E, [f"run_dir={in_run}"], "best.pt",
-             setup=_then(run, _remove(f"{RUN}/checkpoints/best.pt"))),
-        Case("evaluate config corrupted", E, [f"run_dir={in_run}"], "config.yaml",
-             setup=_then(run, _write(f"{RUN}/config.yaml", b"env: [unclosed"))),
-        Case("evaluate window corrupted", E, [f"run_dir={in_run}"], "window.json",
-             setup=_then(run, _write(f"{RUN}/window.json", b"{\"k\": "))),
+        Case(
+            "evaluate best checkpoint corrupted",
+            E,
+            [f"run_dir={in_run}"],
+            "best.pt",
+            setup=_then(run, _write(f"{RUN}/checkpoints/best.pt", b"garbage")),
+        ),
+        Case(
+            "evaluate best checkpoint missing", E, [f"run_dir={in_run}"], "best.pt", setup=_then(run, _remove(f"{RUN}/checkpoints/best.pt"))
+        ),
+        Case(
+            "evaluate config corrupted",
+            E,
+            [f"run_dir={in_run}"],
+            "config.yaml",
+            setup=_then(run, _write(f"{RUN}/config.yaml", b"env: [unclosed")),
+        ),
+        Case(
+            "evaluate window corrupted", E, [f"run_dir={in_run}"], "window.json", setup=_then(run, _write(f"{RUN}/window.json", b'{"k": '))
+        ),
         Case("evaluate unknown argument", E, [f"run_dir={in_run}", "episodez=3"], "episodez", setup=run),
         Case("evaluate zero threads", E, [f"run_dir={in_run}", "threads=0"], "threads=0", setup=run),
         Case("evaluate missing device", E, [f"run_dir={in_run}", "device=cuda:9"], "cuda:9", setup=run),
@@ -257,38 +299,48 @@ def _cases(trained: Path) -> list[Case]:
         Case("report missing runs", R, ["runs={root}/nowhere"], "nowhere"),
         Case("report no runs", R, ["runs={root}"], "no evaluated runs", setup=_write("x.txt", b"x")),
         Case("report impossible fraction", R, ["runs={root}", "causal_fraction=2"], "causal_fraction", setup=run),
-        Case("report evaluation corrupted", R, ["runs={root}", "out={root}/out"], "deploy.json",
-             setup=_then(run, _write(f"{RUN}/eval/deploy.json", b"{\"regime\""))),
-        Case("report notes would be lost", R, ["runs={root}", "out={root}/out", "name=r"], "notes markers",
-             setup=_then(run, _write("out/r.md", b"# R\nA reading written by hand.\n"))),
-        Case("report out is a file", R, ["runs={root}", "out={root}/afile"], "afile",
-             setup=_then(run, _write("afile", b"x"))),
+        Case(
+            "report evaluation corrupted",
+            R,
+            ["runs={root}", "out={root}/out"],
+            "deploy.json",
+            setup=_then(run, _write(f"{RUN}/eval/deploy.json", b'{"regime"')),
+        ),
+        Case(
+            "report notes would be lost",
+            R,
+            ["runs={root}", "out={root}/out", "name=r"],
+            "notes markers",
+            setup=_then(run, _write("out/r.md", b"# R\nA reading written by hand.\n")),
+        ),
+        Case("report out is a file", R, ["runs={root}", "out={root}/afile"], "afile", setup=_then(run, _write("afile", b"x"))),
         Case("report missing argument", R, ["out={root}/out"], "runs=", setup=run),
         # ---- status
         Case("status missing runs", S, ["runs={root}/nowhere"], "nowhere"),
         Case("status runs is a file", S, ["runs={root}/afile"], "afile", setup=_write("afile", b"x")),
-        Case("status corrupted status", S, ["runs={root}"], "status.json",
-             setup=_then(run, _write(f"{RUN}/status.json", b"{not json"))),
+        Case("status corrupted status", S, ["runs={root}"], "status.json", setup=_then(run, _write(f"{RUN}/status.json", b"{not json"))),
         Case("status unknown argument", S, ["runs={root}", "verbose=true"], "verbose", setup=run),
         # ---- strength ablation
         Case("strength above one", A, ["runs={root}", "strengths=[2]", "out={root}/out"], "strengths=2", setup=run),
         Case("strength not a number", A, ["runs={root}", "strengths=[abc]"], "strengths='abc'", setup=run),
         Case("strength zero episodes", A, ["runs={root}", "episodes=0"], "episodes=0", setup=run),
         Case("strength missing runs", A, ["runs={root}/nowhere"], "nowhere"),
-        Case("strength notes would be lost", A, ["runs={root}", "strengths=[1.0]", "episodes=4", "out={root}/out",
-                                                 "name=s"], "notes markers",
-             setup=_then(run, _write("out/s.md", b"# S\nA reading written by hand.\n"))),
+        Case(
+            "strength notes would be lost",
+            A,
+            ["runs={root}", "strengths=[1.0]", "episodes=4", "out={root}/out", "name=s"],
+            "notes markers",
+            setup=_then(run, _write("out/s.md", b"# S\nA reading written by hand.\n")),
+        ),
         # ---- filmstrip
         Case("filmstrip env cannot render", F, [f"runs=[{in_run}]", "out={root}/strip.png"], "render", setup=run),
-        Case("filmstrip labels mismatch", F, [f"runs=[{in_run}]", "labels=[a,b]", "out={root}/strip.png"], "labels",
-             setup=run),
+        Case("filmstrip labels mismatch", F, [f"runs=[{in_run}]", "labels=[a,b]", "out={root}/strip.png"], "labels", setup=run),
         Case("filmstrip missing run", F, ["runs=[{root}/nowhere]", "out={root}/strip.png"], "nowhere"),
         Case("filmstrip zero frames", F, [f"runs=[{in_run}]", "frames=0", "out={root}/strip.png"], "frames >= 2", setup=run),
         # ---- archive
         Case("archive missing runs", X, ["runs={root}/nowhere", "out={root}/archive"], "nowhere"),
         Case("archive out inside runs", X, ["runs={root}", "out={root}/inside"], "must not contain", setup=run),
-        Case("archive out is a file", X, ["runs={root}/rovermaze_u", "out={root}/afile"], "afile",
-             setup=_then(run, _write("afile", b"x"))),
+        Case("archive out is a file", X, ["runs={root}/rovermaze_u", "out={root}/afile"], "afile", setup=_then(run, _write("afile", b"x"))),
         Case("archive missing out", X, ["runs={root}"], "out=", setup=run),
     ]
 
@@ -301,7 +353,14 @@ def trained(tmp_path_factory) -> Path:
 def test_every_bad_input_fails_with_one_line_and_leaves_the_run_root_as_it_was(trained: Path, tmp_path: Path) -> None:
     cases = _cases(trained)
     assert len(cases) >= 40 and {c.module.split(".")[-1] for c in cases} == {
-        "train", "evaluate", "report", "status", "strength_ablation", "filmstrip", "archive"}
+        "train",
+        "evaluate",
+        "report",
+        "status",
+        "strength_ablation",
+        "filmstrip",
+        "archive",
+    }
     before = {}
     for index, case in enumerate(cases):
         case.root = tmp_path / f"case{index:02d}"
@@ -326,7 +385,8 @@ def test_every_bad_input_fails_with_one_line_and_leaves_the_run_root_as_it_was(t
             problems.append(f"no {case.says!r}")
         after = _snapshot(case.root)
         resumable = case.interrupt_after_s is not None and all(
-            json.loads(path.read_text())["status"] == "interrupted" for path in case.root.rglob("status.json"))
+            json.loads(path.read_text())["status"] == "interrupted" for path in case.root.rglob("status.json")
+        )
         if after != before[case.name] and not resumable:
             changed = sorted(set(after.items()) ^ set(before[case.name].items()))
             problems.append(f"the run root changed: {changed[:4]}")
@@ -346,6 +406,12 @@ def test_a_fresh_interpreter_agrees(trained: Path, tmp_path: Path) -> None:
     forked = run_forked(chosen)
     for case in chosen:
         argv = [a.format(root=case.root) for a in case.argv]
-        real = subprocess.run([sys.executable, "-m", case.module, *argv], cwd=case.root, capture_output=True, text=True,
-                              env={**os.environ, "OMP_NUM_THREADS": "1"}, timeout=300)
+        real = subprocess.run(
+            [sys.executable, "-m", case.module, *argv],
+            cwd=case.root,
+            capture_output=True,
+            text=True,
+            env={**os.environ, "OMP_NUM_THREADS": "1"},
+            timeout=300,
+        )
         assert (real.returncode, real.stderr.strip()) == (forked[case.name].code, forked[case.name].stderr.strip())

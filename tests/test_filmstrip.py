@@ -55,16 +55,34 @@ def test_cli_draws_one_row_per_run_from_the_same_start(tmp_path, capsys):
     from torchrl_causal.lifecycle import run
     from torchrl_causal.experiment import compose_config
 
-    tiny = ["env=antmaze_medium", "env.horizon=30", "window.k=2", f"run_root={tmp_path}", "progress_bar=false",
-            "demos.episodes=2", "eval.episodes=1", "eval.num_envs=1", "eval.final_episodes=1"]
-    bc = compose_config([*tiny, "algo=bc", "causal=true", "algo.actor.hidden=16", "algo.actor.num_blocks=1",
-                         "algo.epochs=1", "algo.eval_every=1", "algo.batch_size=16"])
+    tiny = [
+        "env=antmaze_medium",
+        "env.horizon=30",
+        "window.k=2",
+        f"run_root={tmp_path}",
+        "progress_bar=false",
+        "demos.episodes=2",
+        "eval.episodes=1",
+        "eval.num_envs=1",
+        "eval.final_episodes=1",
+    ]
+    bc = compose_config(
+        [
+            *tiny,
+            "algo=bc",
+            "causal=true",
+            "algo.actor.hidden=16",
+            "algo.actor.num_blocks=1",
+            "algo.epochs=1",
+            "algo.eval_every=1",
+            "algo.batch_size=16",
+        ]
+    )
     expert = compose_config([*tiny, "algo=expert", "causal=false"])
     for cfg in (bc, expert):
         run(cfg)
     out = tmp_path / "strip.png"
-    main([f"runs=[{bc.run_dir},{expert.run_dir}]", "labels=[C-BC,Expert]", f"out={out}", "frames=2", "every=15",
-          "size=32"])
+    main([f"runs=[{bc.run_dir},{expert.run_dir}]", "labels=[C-BC,Expert]", f"out={out}", "frames=2", "every=15", "size=32"])
     assert out.is_file() and "C-BC:" in capsys.readouterr().out
     starts = [filmstrip_of_run(cfg.run_dir, frames=2, every=30, size=32).frames[0] for cfg in (bc, expert)]
     np.testing.assert_array_equal(*starts)  # one seed: every row starts from the same state
@@ -72,10 +90,10 @@ def test_cli_draws_one_row_per_run_from_the_same_start(tmp_path, capsys):
         main([f"runs=[{bc.run_dir}]", "labels=[a,b]", f"out={out}"])
     # One video per run, named after its label; the same episode as the strip's.
     videos = tmp_path / "videos"
-    main([f"runs=[{bc.run_dir},{expert.run_dir}]", "labels=[C-BC,Expert]", f"out={videos}", "format=gif", "every=15",
-          "size=32"])
+    main([f"runs=[{bc.run_dir},{expert.run_dir}]", "labels=[C-BC,Expert]", f"out={videos}", "format=gif", "every=15", "size=32"])
     assert sorted(path.name for path in videos.iterdir()) == ["C-BC.gif", "Expert.gif"]
     import imageio.v3 as iio
+
     frames = iio.imread(videos / "Expert.gif", index=None)
     assert np.abs(frames[0].astype(int) - starts[1].astype(int)).mean() < 3  # GIF's palette: close, not equal
     assert frames.shape[0] == len(filmstrip_of_run(expert.run_dir, frames=1000, every=15, size=32).frames)

@@ -67,9 +67,7 @@ def is_open_path(diagram: CausalDiagram, path, given) -> bool:
     feasible = edge_marks(diagram, path[0], path[1]) if len(path) > 1 else set()
     for node, nxt in zip(path[1:], path[2:]):
         feasible = {
-            option
-            for option in edge_marks(diagram, node, nxt)
-            if any(passes(node, incoming[1], option[0]) for incoming in feasible)
+            option for option in edge_marks(diagram, node, nxt) if any(passes(node, incoming[1], option[0]) for incoming in feasible)
         }
     return len(path) == 1 or bool(feasible)
 
@@ -102,9 +100,7 @@ def reference_backdoor(diagram: CausalDiagram, actions, reward, family) -> dict:
 
 def variant(template: TimeSliceTemplate, hidden: str) -> TimeSliceTemplate:
     """The exactly imitable version: no persistence of the hidden variable, reward at the end."""
-    return template.replace(
-        directed=[e for e in template.directed if e != (hidden, hidden, 1)], reward_slices="last"
-    )
+    return template.replace(directed=[e for e in template.directed if e != (hidden, hidden, 1)], reward_slices="last")
 
 
 def window_family(window: AdjustmentWindow, action: str, horizon: int) -> dict:
@@ -316,8 +312,7 @@ def test_theorem_1_counterexample():
         variables=("a", "b", "c", "x"),
         action="x",
         observed=("a", "b", "c", "x"),
-        directed=[("b", "x", 0), ("x", "b", 1), ("a", "a", 2), ("a", "b", 0), ("a", "c", 0),
-                  ("b", "b", 1), ("c", "b", 2), ("x", "a", 2)],
+        directed=[("b", "x", 0), ("x", "b", 1), ("a", "a", 2), ("a", "b", 0), ("a", "c", 0), ("b", "b", 1), ("c", "b", 2), ("x", "a", 2)],
         reward_parents=("c",),
         reward_slices="last",
     )
@@ -326,8 +321,7 @@ def test_theorem_1_counterexample():
     proxy = exact_adjustment(template, k + 1)
     assert proxy.adjustment_set(("x", k)) == set()
     shifted = {
-        ("x", t): proxy.adjustment_set(("x", t)) if t <= k
-        else {(v, s + t - k) for v, s in proxy.adjustment_set(("x", k))}  # type: ignore[misc]
+        ("x", t): proxy.adjustment_set(("x", t)) if t <= k else {(v, s + t - k) for v, s in proxy.adjustment_set(("x", k))}  # type: ignore[misc]
         for t in range(horizon)
     }
     g = template.unroll(horizon)
@@ -337,8 +331,13 @@ def test_theorem_1_counterexample():
     # The window of Algorithm 1's variables fails at the same horizon; exact mode searches
     # the other windows before refusing and finds one that holds at every horizon tried.
     built = AdjustmentWindow(
-        k=k, action="x", lags={v: (tuple(range(1, k + 1)) if v == "x" else tuple(range(k + 1)))
-                               for v in sorted({v for a in proxy.actions for v, _ in proxy.adjustment_set(a)})})
+        k=k,
+        action="x",
+        lags={
+            v: (tuple(range(1, k + 1)) if v == "x" else tuple(range(k + 1)))
+            for v in sorted({v for a in proxy.actions for v, _ in proxy.adjustment_set(a)})
+        },
+    )
     assert not sequential_pi_backdoor(g, actions_of(template, horizon), "Y", window_family(built, "x", horizon)).holds
     window = windowed_adjustment(template, k)
     assert window.exact and window.lags != built.lags
@@ -444,9 +443,7 @@ def test_extended_parents_and_effective_children(case, data):
     assert g.pa_plus(v) == (component | {p for c in component for p in g.parents(c)}) - {v}
     nxg = g.to_networkx()
     hidden = set(g.latent)
-    via_latent = nx.DiGraph(
-        [(a, b) for a, b in g.directed_edges if a == v or a in hidden]
-    )
+    via_latent = nx.DiGraph([(a, b) for a, b in g.directed_edges if a == v or a in hidden])
     reach = nx.descendants(via_latent, v) if v in via_latent else set()
     assert g.ch_plus(v) == {u for u in reach if u not in hidden}
     assert g.ancestors(v) == nx.ancestors(nxg, v) - {n for n in nxg if isinstance(n, Confounder)} | {v}
@@ -458,11 +455,7 @@ def test_sequential_pi_backdoor_matches_reference(case, data):
     g, actions = case
     assume(actions)
     observed = [v for v in g.nodes if v not in g.latent and v != "Y"]
-    family = {
-        x: set(data.draw(st.lists(st.sampled_from([v for v in observed if v in g.before(x)] or [None]))))
-        - {None}
-        for x in actions
-    }
+    family = {x: set(data.draw(st.lists(st.sampled_from([v for v in observed if v in g.before(x)] or [None])))) - {None} for x in actions}
     report = sequential_pi_backdoor(g, actions, "Y", family)
     assert dict(report.reasons) == reference_backdoor(g, actions, "Y", family)
     assert report.holds == (set(report.reasons.values()) <= {"separated", "not_ancestor"})
@@ -473,13 +466,8 @@ def brute_force_imitable(g: CausalDiagram, actions) -> bool:
     choices = []
     for x in actions:
         candidates = [v for v in observed if v in g.before(x)]
-        choices.append(
-            [set(c) for r in range(len(candidates) + 1) for c in itertools.combinations(candidates, r)]
-        )
-    return any(
-        sequential_pi_backdoor(g, actions, "Y", dict(zip(actions, family))).holds
-        for family in itertools.product(*choices)
-    )
+        choices.append([set(c) for r in range(len(candidates) + 1) for c in itertools.combinations(candidates, r)])
+    return any(sequential_pi_backdoor(g, actions, "Y", dict(zip(actions, family))).holds for family in itertools.product(*choices))
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -552,10 +540,7 @@ def test_bounded_influence_matches_slow_reference(template):
     def slice_of(node):
         return horizon if node == "Y" else node[1]
 
-    slow = max(
-        slice_of(v) - min((slice_of(u) for u in projection.pa_plus(v)), default=slice_of(v))
-        for v in projection.nodes
-    )
+    slow = max(slice_of(v) - min((slice_of(u) for u in projection.pa_plus(v)), default=slice_of(v)) for v in projection.nodes)
     if influence.bounded:
         assert influence.required_k == max(slow, 0)
         assert check_bounded_influence(template, influence.required_k).holds
@@ -646,8 +631,11 @@ def test_bad_input_is_named():
         CausalDiagram([(["a"], "b")])
     with pytest.raises(GraphError, match="unknown node"):
         sequential_pi_backdoor(g, ["X"], "Y", {"X": [["Z"]]})
-    for check in (lambda: sequential_pi_backdoor(g, ["X", "Y"], "Y", {"X": set(), "Y": set()}),
-                  lambda: find_ox(g, ["X", "Y"], "Y"), lambda: find_adjustment(g, ["Y"], "Y")):
+    for check in (
+        lambda: sequential_pi_backdoor(g, ["X", "Y"], "Y", {"X": set(), "Y": set()}),
+        lambda: find_ox(g, ["X", "Y"], "Y"),
+        lambda: find_adjustment(g, ["Y"], "Y"),
+    ):
         with pytest.raises(GraphError, match="the reward 'Y' cannot also be an action"):
             check()
     with pytest.raises(GraphError, match="action 'X' is listed twice"):
@@ -664,8 +652,7 @@ def test_bad_input_is_named():
 def test_route_choice_without_an_order_follows_the_backdoor_rule():
     # Inserted in this order, the default topological sort puts W after Y; W is still an
     # observed non-descendant of X, so the backdoor rule admits it (and finds it harmful).
-    g = CausalDiagram(directed=[(("Z", 0), ("X", 0)), (("Z", 0), "Y"), (("X", 0), "Y")],
-                      bidirected=[(("X", 0), ("W", 0)), (("W", 0), "Y")])
+    g = CausalDiagram(directed=[(("Z", 0), ("X", 0)), (("Z", 0), "Y"), (("X", 0), "Y")], bidirected=[(("X", 0), ("W", 0)), (("W", 0), "Y")])
     assert g.nodes.index(("W", 0)) > g.nodes.index("Y") and not g.has_explicit_order
     x = ("X", 0)
     with_w = sequential_pi_backdoor(g, [x], "Y", {x: {("Z", 0), ("W", 0)}})
@@ -683,8 +670,7 @@ def test_route_choice_without_an_order_follows_the_backdoor_rule():
 
 def test_actions_without_an_order_keep_their_listed_time_order():
     # X1 and X2 are not related by ancestry; listing decides which comes first.
-    g = CausalDiagram([("A", "X1"), ("B", "X2"), ("X1", "C"), ("X2", "D"), ("C", "Y"), ("D", "Y")],
-                      bidirected=[("A", "D")])
+    g = CausalDiagram([("A", "X1"), ("B", "X2"), ("X1", "C"), ("X2", "D"), ("C", "Y"), ("D", "Y")], bidirected=[("A", "D")])
     # X1 first: its set may hold B (a non-descendant of X1 and of X2) but not D (descendant of X2)
     assert sequential_pi_backdoor(g, ["X1", "X2"], "Y", {"X1": {"A", "B"}, "X2": {"B"}}).holds
     with pytest.raises(GraphError, match="descendants of 'X1' or of a later action"):
@@ -708,10 +694,12 @@ def test_three_refusals_are_told_apart():
     assert len(info.value.chain) > 3
     # The proxy is imitable and Assumption 1 holds for k = 2, but every window fails at H = 3.
     template = TimeSliceTemplate(
-        variables=("a", "b", "c", "x"), action="x", observed=("a", "b", "x"),
-        directed=[("c", "x", 0), ("x", "b", 1), ("a", "a", 1), ("a", "b", 2), ("a", "x", 0), ("b", "c", 0),
-                  ("b", "x", 0), ("c", "a", 1)],
-        reward_parents=("b",), reward_slices="last",
+        variables=("a", "b", "c", "x"),
+        action="x",
+        observed=("a", "b", "x"),
+        directed=[("c", "x", 0), ("x", "b", 1), ("a", "a", 1), ("a", "b", 2), ("a", "x", 0), ("b", "c", 0), ("b", "x", 0), ("c", "a", 1)],
+        reward_parents=("b",),
+        reward_slices="last",
     )
     assert exact_adjustment(template, 3) and check_bounded_influence(template, 2).holds
     with pytest.raises(WindowConstructionError) as info:
@@ -726,9 +714,12 @@ def test_three_refusals_are_told_apart():
 def test_exact_mode_searches_other_windows_before_refusing():
     # Algorithm 1's own window (nothing to condition on) fails at H = 9; {s2, x} holds.
     template = TimeSliceTemplate(
-        variables=["x", "s0", "s2"], action="x", observed=["x", "s2"],
+        variables=["x", "s0", "s2"],
+        action="x",
+        observed=["x", "s2"],
         directed=[("s2", "s0", 2), ("s2", "s2", 2), ("x", "s0", 1), ("s0", "x", 0)],
-        reward_parents=["s0"], reward_slices="last",
+        reward_parents=["s0"],
+        reward_slices="last",
     )
     k = 2
     assert check_bounded_influence(template, k).holds
@@ -749,8 +740,13 @@ def test_exact_mode_searches_other_windows_before_refusing():
 def test_relaxed_witnesses_come_from_longer_horizons_and_long_lags_are_flagged():
     # k = 1: nothing is open in the horizon-2 proxy, but x_0 <-> s_2 reaches Y later on.
     template = TimeSliceTemplate(
-        variables=["x", "s"], action="x", observed=["x", "s"], directed=[("s", "x", 0)],
-        bidirected=[("x", "s", 2)], reward_parents=["x"], reward_slices="last",
+        variables=["x", "s"],
+        action="x",
+        observed=["x", "s"],
+        directed=[("s", "x", 0)],
+        bidirected=[("x", "s", 2)],
+        reward_parents=["x"],
+        reward_slices="last",
     )
     window = windowed_adjustment(template, 1, mode="relaxed")
     proxy = template.unroll(2)
@@ -774,10 +770,25 @@ def test_bounded_influence_is_linear_in_the_unrolled_size():
     # Persistent latents with lag-3 edges: the latent projection of the horizon this check
     # needs has millions of bidirected edges (the old implementation took minutes).
     template = TimeSliceTemplate(
-        variables=("a", "b", "c", "d", "e", "x"), action="x", observed=("a", "b", "x"),
-        directed=[("a", "x", 0), ("x", "a", 1), ("c", "c", 1), ("d", "d", 1), ("e", "e", 1), ("c", "a", 3),
-                  ("d", "b", 2), ("e", "b", 1), ("c", "d", 0), ("d", "e", 3), ("b", "x", 0)],
-        bidirected=[("c", "e", 2)], reward_parents=("a", "b"), reward_slices="last",
+        variables=("a", "b", "c", "d", "e", "x"),
+        action="x",
+        observed=("a", "b", "x"),
+        directed=[
+            ("a", "x", 0),
+            ("x", "a", 1),
+            ("c", "c", 1),
+            ("d", "d", 1),
+            ("e", "e", 1),
+            ("c", "a", 3),
+            ("d", "b", 2),
+            ("e", "b", 1),
+            ("c", "d", 0),
+            ("d", "e", 3),
+            ("b", "x", 0),
+        ],
+        bidirected=[("c", "e", 2)],
+        reward_parents=("a", "b"),
+        reward_slices="last",
     )
     start = time.process_time()
     influence = check_bounded_influence(template)
@@ -786,7 +797,9 @@ def test_bounded_influence_is_linear_in_the_unrolled_size():
 
 
 def test_maze_templates_import_without_mujoco_or_torch():
-    code = ("import sys, torchrl_causal.envs.templates as t; assert t.ANTMAZE_TEMPLATE.action == 'X'; "
-            "print(sorted(m for m in ('mujoco', 'torch', 'torchrl') if m in sys.modules))")
+    code = (
+        "import sys, torchrl_causal.envs.templates as t; assert t.ANTMAZE_TEMPLATE.action == 'X'; "
+        "print(sorted(m for m in ('mujoco', 'torch', 'torchrl') if m in sys.modules))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"

@@ -173,10 +173,11 @@ def admissible_family(diagram: CausalDiagram, actions: list) -> dict | None:
         if i < 0:
             return {}
         x = dag.actions[i]
-        options = [0] if not ancestors(parents, 1 << dag.reward) >> x & 1 else [
-            z for z in subsets(dag.observed_before[x])
-            if separated([p & ~(1 << x) for p in parents], x, dag.reward, z)
-        ]
+        options = (
+            [0]
+            if not ancestors(parents, 1 << dag.reward) >> x & 1
+            else [z for z in subsets(dag.observed_before[x]) if separated([p & ~(1 << x) for p in parents], x, dag.reward, z)]
+        )
         for z in options:
             earlier = search(i - 1, [z if v == x else p for v, p in enumerate(parents)])
             if earlier is not None:
@@ -191,8 +192,7 @@ def admissible_family(diagram: CausalDiagram, actions: list) -> dict | None:
 
 # ---------------------------------------------------------------------- the tests
 def describe(diagram: CausalDiagram, actions: list) -> str:
-    return (f"actions={actions}, directed={diagram.directed_edges}, bidirected={diagram.bidirected_edges}, "
-            f"latent={sorted(diagram.latent)}")
+    return f"actions={actions}, directed={diagram.directed_edges}, bidirected={diagram.bidirected_edges}, latent={sorted(diagram.latent)}"
 
 
 def test_find_ox_verdict_matches_brute_force(cases):
@@ -248,9 +248,9 @@ def test_certificates_hold_under_every_family(cases):
             favourable = [0 if v < len(dag.names) and dag.names[v] in later else p for v, p in enumerate(dag.parents)]
             assert ancestors(favourable, 1 << dag.reward) >> index[x] & 1, describe(diagram, actions)
             cut = [p & ~(1 << index[x]) for p in favourable]
-            assert not any(
-                separated(cut, index[x], dag.reward, z) for z in subsets(dag.observed_before[index[x]])
-            ), describe(diagram, actions)
+            assert not any(separated(cut, index[x], dag.reward, z) for z in subsets(dag.observed_before[index[x]])), describe(
+                diagram, actions
+            )
             assert err.witness[-1] == "Y" and x in err.actions
             checked += 1
     assert checked > 100
@@ -266,9 +266,13 @@ def test_intermediate_latents_stay_in_the_component_graph():
         find_adjustment(tiny, ["X"], "Y")
     assert info.value.witness == ("X", "L", "O", "Y")
     template = TimeSliceTemplate(
-        variables=["s", "o", "x"], action="x", observed=["o", "x"],
+        variables=["s", "o", "x"],
+        action="x",
+        observed=["o", "x"],
         directed=[("s", "x", 0), ("s", "o", 0), ("x", "s", 1)],
-        reward_parents=["o"], reward_bidirected=["s"], reward_slices="all",
+        reward_parents=["o"],
+        reward_bidirected=["s"],
+        reward_slices="all",
     )
     for horizon in (1, 5, 40):
         with pytest.raises(NotImitableError) as info:
@@ -278,9 +282,13 @@ def test_intermediate_latents_stay_in_the_component_graph():
 
 def test_action_outgoing_edges_are_cut_in_the_component_graph():
     template = TimeSliceTemplate(
-        variables=["s", "x"], action="x", observed=["s", "x"],
-        directed=[("s", "s", 1), ("x", "s", 1)], bidirected=[("s", "x", 0), ("x", "x", 1)],
-        reward_parents=["s"], reward_slices="last",
+        variables=["s", "x"],
+        action="x",
+        observed=["s", "x"],
+        directed=[("s", "s", 1), ("x", "s", 1)],
+        bidirected=[("s", "x", 0), ("x", "x", 1)],
+        reward_parents=["s"],
+        reward_slices="last",
     )
     for horizon in (2, 10, 40):
         g = template.unroll(horizon)

@@ -47,27 +47,61 @@ def test_our_model_is_ogbench_humanoid_in_ogbench_maze():
     for option in ("timestep", "integrator", "iterations", "tolerance", "cone", "solver", "jacobian"):
         assert getattr(ours.opt, option) == getattr(reference.opt, option), option
     assert ours.opt.timestep == 0.005 and ours.opt.iterations == 100
-    for field in ("jnt_range", "jnt_stiffness", "dof_damping", "dof_armature", "actuator_gear", "actuator_ctrlrange",
-                  "body_mass", "body_inertia", "body_pos", "body_quat", "qpos0"):
+    for field in (
+        "jnt_range",
+        "jnt_stiffness",
+        "dof_damping",
+        "dof_armature",
+        "actuator_gear",
+        "actuator_ctrlrange",
+        "body_mass",
+        "body_inertia",
+        "body_pos",
+        "body_quat",
+        "qpos0",
+    ):
         np.testing.assert_array_equal(getattr(ours, field), getattr(reference, field), err_msg=field)
+
     # The humanoid's geoms (contact, friction, shape) are OGBench's, then come the walls.
     def body_geoms(model):
         ids = np.flatnonzero(model.geom_bodyid > 0)
-        return {field: getattr(model, field)[ids] for field in
-                ("geom_size", "geom_pos", "geom_contype", "geom_conaffinity", "geom_condim", "geom_friction",
-                 "geom_solref", "geom_solimp")}
+        return {
+            field: getattr(model, field)[ids]
+            for field in (
+                "geom_size",
+                "geom_pos",
+                "geom_contype",
+                "geom_conaffinity",
+                "geom_condim",
+                "geom_friction",
+                "geom_solref",
+                "geom_solimp",
+            )
+        }
+
     for field, value in body_geoms(reference).items():
         np.testing.assert_array_equal(body_geoms(ours)[field], value, err_msg=field)
     # Walls: the same boxes (4 m cells, 2 m high, default contact) in OGBench's frame.
     rows, cols = 8, 8
+
     def walls(model, to_ogbench):
         boxes = []
         for geom in range(model.ngeom):
             if model.geom(geom).name.startswith("block_"):
                 x, y, z = model.geom_pos[geom]
-                boxes.append((*to_ogbench(x, y), z, *model.geom_size[geom], *model.geom_solref[geom],
-                              *model.geom_friction[geom], model.geom_contype[geom], model.geom_conaffinity[geom]))
+                boxes.append(
+                    (
+                        *to_ogbench(x, y),
+                        z,
+                        *model.geom_size[geom],
+                        *model.geom_solref[geom],
+                        *model.geom_friction[geom],
+                        model.geom_contype[geom],
+                        model.geom_conaffinity[geom],
+                    )
+                )
         return sorted(np.round(boxes, 9).tolist())
+
     ours_in_ogbench_frame = walls(ours, lambda x, y: (x + 2 * cols - 6, 2 * rows - 6 - y))
     assert ours_in_ogbench_frame == walls(reference, lambda x, y: (x, y))
     assert len(ours_in_ogbench_frame) == sum(map(sum, HumanoidMazeEnv.tasks["medium"].maze_map))
@@ -109,8 +143,7 @@ def test_trajectories_match_ogbench_step_for_step(start):
         gap = max(np.abs(data.qpos - reference.data.qpos).max(), np.abs(data.qvel - reference.data.qvel).max())
         assert gap < 1e-9, (step, gap)
         # what the env emits (float32) is OGBench's observation
-        torch.testing.assert_close(_ogbench_observation(td)[0], torch.as_tensor(observation, dtype=torch.float32),
-                                   rtol=1e-5, atol=1e-4)
+        torch.testing.assert_close(_ogbench_observation(td)[0], torch.as_tensor(observation, dtype=torch.float32), rtol=1e-5, atol=1e-4)
         assert _wall_contacts(reference.model, reference.data) == 0 and _wall_contacts(ours.simulator.model, data) == 0
     assert reference.data.ncon > 0  # it was on the floor, not in free flight
 
@@ -144,7 +177,8 @@ def test_skill_reward_is_stand_times_capped_speed_and_a_low_head_ends_it():
         mujoco.mj_kinematics(model, data)  # body poses of the state after the step
         speed = float((data.qpos[:2] - before) @ td["direction"][0].double().numpy()) / 0.025
         stand = tolerance(data.xpos[head, 2], bounds=(1.4, float("inf")), margin=0.35) * tolerance(
-            data.xmat[torso][8], bounds=(0.9, float("inf")), margin=1.9, sigmoid="linear", value_at_margin=0)
+            data.xmat[torso][8], bounds=(0.9, float("inf")), margin=1.9, sigmoid="linear", value_at_margin=0
+        )
         assert td["speed"].item() == pytest.approx(speed, abs=1e-4)
         assert td["reward"].item() == pytest.approx(stand * (1 + min(speed, 0.05)), abs=1e-4)
         capped += speed > 0.05

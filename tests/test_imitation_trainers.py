@@ -19,8 +19,14 @@ from torchrl_causal.trainers.update import ActorCriticUpdate
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
 
 # utd 0.3 is not a binary fraction: floor(0.3 * 48) = 14 updates, not 15 or 13.
-COUNTS = ["algo.utd_ratio=0.3", "algo.random_steps=12", "algo.total_steps=60", "algo.frames_per_batch=6",
-          "algo.num_envs=2", "algo.eval_every=1000"]
+COUNTS = [
+    "algo.utd_ratio=0.3",
+    "algo.random_steps=12",
+    "algo.total_steps=60",
+    "algo.frames_per_batch=6",
+    "algo.num_envs=2",
+    "algo.eval_every=1000",
+]
 
 
 def _record_actor_calls(monkeypatch, calls: list) -> None:
@@ -31,7 +37,8 @@ def _record_actor_calls(monkeypatch, calls: list) -> None:
     def make_and_hook(cfg, env):
         actor = make_policy(cfg, env)
         actor.module[0].register_forward_pre_hook(  # the network: losses call it through get_dist
-            lambda module, args: calls.append((args[0].shape[0] if args[0].batch_dims else 1, module.training)))
+            lambda module, args: calls.append((args[0].shape[0] if args[0].batch_dims else 1, module.training))
+        )
         return actor
 
     monkeypatch.setattr(off_policy, "make_policy", make_and_hook)
@@ -90,8 +97,9 @@ def test_gail_refuses_actor_dropout(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("absorbing", [False, True])
 def test_gail_ppo_ratio_is_one_before_the_first_update(tmp_path: Path, absorbing: bool) -> None:
-    trainer = build_trainer(tiny_config(tmp_path, "rovermaze_u", "gail", False, "algo.rounds=1",
-                                        f"algo.loss.absorbing={str(absorbing).lower()}"))
+    trainer = build_trainer(
+        tiny_config(tmp_path, "rovermaze_u", "gail", False, "algo.rounds=1", f"algo.loss.absorbing={str(absorbing).lower()}")
+    )
     ratios = {}
     update = trainer._update_policy
     discriminator_update = trainer._update_discriminator
@@ -118,8 +126,11 @@ def test_gail_ppo_ratio_is_one_before_the_first_update(tmp_path: Path, absorbing
 
 def test_gail_discriminator_passes_over_every_policy_row_each_epoch(tmp_path: Path, monkeypatch) -> None:
     # 2 envs x the tiny horizon of policy rows, minibatches of 32 with a short last one.
-    trainer = build_trainer(tiny_config(tmp_path, "rovermaze_u", "gail", False, "algo.rounds=1",
-                                        "algo.discriminator_epochs=3", "algo.discriminator_batch_size=32"))
+    trainer = build_trainer(
+        tiny_config(
+            tmp_path, "rovermaze_u", "gail", False, "algo.rounds=1", "algo.discriminator_epochs=3", "algo.discriminator_batch_size=32"
+        )
+    )
     policy_batches = []
     pair = gail.gail_discriminator_batch
 
@@ -132,7 +143,7 @@ def test_gail_discriminator_passes_over_every_policy_row_each_epoch(tmp_path: Pa
     rows = trainer.cfg.algo.episodes_per_round * trainer.cfg.env.horizon
     steps_per_epoch = math.ceil(rows / 32)
     assert len(policy_batches) == 3 * steps_per_epoch and rows % 32 != 0
-    passes = [torch.cat(policy_batches[i:i + steps_per_epoch]) for i in range(0, len(policy_batches), steps_per_epoch)]
+    passes = [torch.cat(policy_batches[i : i + steps_per_epoch]) for i in range(0, len(policy_batches), steps_per_epoch)]
     first = passes[0].unique(dim=0, return_counts=True)
     for seen in passes:  # each pass holds the same rows, each as often: a permutation of the round's rows
         assert seen.shape[0] == rows

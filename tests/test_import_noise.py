@@ -20,9 +20,7 @@ warnings.warn("a real python warning")
 
 
 def test_imports_are_quiet_and_real_warnings_still_show():
-    result = subprocess.run(
-        [sys.executable, "-c", SCRIPT], capture_output=True, text=True, cwd=Path(__file__).parents[1], timeout=240
-    )
+    result = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, cwd=Path(__file__).parents[1], timeout=240)
     assert result.returncode == 0, result.stderr
     output = result.stdout + result.stderr
     assert "Adroit" not in output and "Initialized LazyTensorStorage" not in output

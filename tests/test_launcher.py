@@ -17,8 +17,9 @@ from test_trainers import ALGO_TINY, TINY
 from torchrl_causal.evaluation import load_runs
 from torchrl_causal.experiment import load_checkpoint
 
-pytest.importorskip("hydra_plugins.hydra_submitit_launcher",
-                    reason="hydra-submitit-launcher is not installed: pip install 'torchrl-causal[cluster]'")
+pytest.importorskip(
+    "hydra_plugins.hydra_submitit_launcher", reason="hydra-submitit-launcher is not installed: pip install 'torchrl-causal[cluster]'"
+)
 
 REPO = Path(__file__).resolve().parents[1]
 SWEEP = ["-m", "env=route_choice", "algo=bc", "causal=true", "seed=0,1", *TINY, *ALGO_TINY["bc"]]
@@ -26,16 +27,21 @@ SWEEP = ["-m", "env=route_choice", "algo=bc", "causal=true", "seed=0,1", *TINY, 
 
 def run_sweep(root: Path, *extra: str) -> None:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
-    done = subprocess.run([sys.executable, "-m", "torchrl_causal.train", *SWEEP, f"run_root={root}", *extra],
-                          capture_output=True, text=True, env=env, cwd=root.parent, timeout=600)
+    done = subprocess.run(
+        [sys.executable, "-m", "torchrl_causal.train", *SWEEP, f"run_root={root}", *extra],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=root.parent,
+        timeout=600,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
 
 
 def test_local_launcher_runs_jobs_in_their_own_processes_with_the_default_launchers_results(tmp_path: Path) -> None:
     run_sweep(tmp_path / "basic")
     run_sweep(tmp_path / "processes", "hydra/launcher=processes")
-    runs = {name: {r.path.relative_to(tmp_path / name): r for r in load_runs(tmp_path / name)}
-            for name in ("basic", "processes")}
+    runs = {name: {r.path.relative_to(tmp_path / name): r for r in load_runs(tmp_path / name)} for name in ("basic", "processes")}
     assert sorted(runs["basic"]) == sorted(runs["processes"]) and len(runs["basic"]) == 2
     for job, basic in runs["basic"].items():
         local = runs["processes"][job]
@@ -49,7 +55,6 @@ def test_local_launcher_runs_jobs_in_their_own_processes_with_the_default_launch
     # submitit's local executor names each job after its process id and logs it there.
     logs = {int(p.parent.name): p.read_text() for p in (tmp_path / "processes" / ".submitit").glob("*/*_0_log.out")}
     assert len(logs) == 2 and os.getpid() not in logs
-    pids = {job: [pid for pid, text in logs.items() if f"{run.path} [deploy]" in text]
-            for job, run in runs["processes"].items()}
+    pids = {job: [pid for pid, text in logs.items() if f"{run.path} [deploy]" in text] for job, run in runs["processes"].items()}
     assert sorted(len(found) for found in pids.values()) == [1, 1], pids
     assert len({found[0] for found in pids.values()}) == 2  # two jobs, two processes

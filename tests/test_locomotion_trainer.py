@@ -17,8 +17,9 @@ FRAMES = 200  # LocomotionConfig.frames_per_batch
 
 
 def _config(total_steps: int, **changes):
-    return SKILLS["humanoid"].config(total_steps=total_steps, random_steps=400, hidden=32, buffer_size=2_000,
-                                     eval_every=100_000, eval_envs=2, eval_steps=20, **changes)
+    return SKILLS["humanoid"].config(
+        total_steps=total_steps, random_steps=400, hidden=32, buffer_size=2_000, eval_every=100_000, eval_envs=2, eval_steps=20, **changes
+    )
 
 
 def test_resume_from_the_small_state_refills_the_buffer_then_updates(tmp_path):
@@ -38,8 +39,7 @@ def test_resume_from_the_small_state_refills_the_buffer_then_updates(tmp_path):
 
     # Machine B: only the small state travels. The policy refills the buffer: 2 batches (200, 400),
     # then updates resume at the 3rd batch (600 > 400): 100 updates per batch of 200 steps.
-    second = train_locomotion(tmp_path / "machine_b", _config(1400), skill="humanoid", output=tmp_path / "b.pt",
-                              resume_from=state_file)
+    second = train_locomotion(tmp_path / "machine_b", _config(1400), skill="humanoid", output=tmp_path / "b.pt", resume_from=state_file)
     assert second["steps"] == 1400 and second["updates"] == 200 + 100
     resumed = torch.load(tmp_path / "machine_b" / "resume_state.pt", weights_only=True)
     assert resumed["counters"]["collect_seed"] == state["counters"]["collect_seed"] + 1  # fresh episodes
@@ -54,8 +54,7 @@ def test_resume_refuses_another_config_or_skill(tmp_path):
     train_locomotion(tmp_path / "a", _config(FRAMES), skill="humanoid", output=None)
     state_file = tmp_path / "a" / "resume_state.pt"
     with pytest.raises(ValueError, match="updates_per_step"):
-        train_locomotion(tmp_path / "b", _config(2 * FRAMES, updates_per_step=1.0), skill="humanoid",
-                         output=None, resume_from=state_file)
+        train_locomotion(tmp_path / "b", _config(2 * FRAMES, updates_per_step=1.0), skill="humanoid", output=None, resume_from=state_file)
     with pytest.raises(ValueError, match="'humanoid' skill, not 'ant'"):
         train_locomotion(tmp_path / "c", _config(2 * FRAMES), skill="ant", output=None, resume_from=state_file)
     assert not any(tmp_path.rglob("*locomotion.pt")) and not SKILLS["humanoid"].weights.exists()

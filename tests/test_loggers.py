@@ -40,8 +40,7 @@ def test_tensorboard_logs_the_csv_runs_scalars(tmp_path, csv_scalars) -> None:
     (events,) = {path.parent for path in Path(cfg.run_dir).rglob("events.out.tfevents.*")}
     accumulator = EventAccumulator(str(events))
     accumulator.Reload()
-    logged = {tag: [(event.step, event.value) for event in accumulator.Scalars(tag)]
-              for tag in accumulator.Tags()["scalars"]}
+    logged = {tag: [(event.step, event.value) for event in accumulator.Scalars(tag)] for tag in accumulator.Tags()["scalars"]}
     assert logged.keys() == csv_scalars.keys()
     for tag, series in csv_scalars.items():
         assert [step for step, _ in logged[tag]] == [step for step, _ in series], tag
@@ -62,8 +61,9 @@ def test_wandb_offline_logs_the_csv_runs_scalars(tmp_path, csv_scalars, monkeypa
         return original(self, data, *args, **kwargs)
 
     monkeypatch.setattr(wandb.sdk.wandb_run.Run, "log", spy)
-    cfg = tiny_config(tmp_path, "route_choice", "bc", True, *BC, "logger=wandb", "logger.offline=true",
-                      "logger.project=torchrl-causal-tests")
+    cfg = tiny_config(
+        tmp_path, "route_choice", "bc", True, *BC, "logger=wandb", "logger.offline=true", "logger.project=torchrl-causal-tests"
+    )
     run(cfg)
     assert logged.keys() == csv_scalars.keys()
     for tag, series in csv_scalars.items():
@@ -79,7 +79,10 @@ def test_wandb_offline_logs_the_csv_runs_scalars(tmp_path, csv_scalars, monkeypa
 def test_a_missing_extra_stops_the_run_before_its_directory(tmp_path, monkeypatch, logger: str, extra: str) -> None:
     monkeypatch.setitem(sys.modules, extra, None)  # as if it were not installed
     cfg = tiny_config(tmp_path, "route_choice", "bc", True, *BC, f"logger={logger}")
-    with pytest.raises(ConfigValueError, match=rf"^logger={logger} needs {extra}, which is not installed: "
-                                               rf"pip install 'torchrl-causal\[{extra}\]'$"):
+    with pytest.raises(
+        ConfigValueError,
+        match=rf"^logger={logger} needs {extra}, which is not installed: "
+        rf"pip install 'torchrl-causal\[{extra}\]'$",
+    ):
         run(cfg)
     assert list(tmp_path.iterdir()) == []

@@ -34,8 +34,9 @@ def test_a_transition_costs_what_the_replay_tensors_hold(tmp_path: Path) -> None
     assert encoded == 2 * transitions.shape[0] * encoded_transition_bytes(cfg)
 
 
-@pytest.mark.parametrize("overrides", [["window.k=40"], ["window.k=33", "causal=false", "window.window_matched=true"],
-                                       ["window.k=25", "window.drop=[X]"]])
+@pytest.mark.parametrize(
+    "overrides", [["window.k=40"], ["window.k=33", "causal=false", "window.window_matched=true"], ["window.k=25", "window.drop=[X]"]]
+)
 def test_long_windows_are_extrapolated_exactly(overrides: list[str]) -> None:
     cfg = compose_config(["env=rovermaze_u", "algo=bc", *overrides])
     assert cfg.window.k > EXACT_K
@@ -46,8 +47,11 @@ def test_a_run_that_does_not_fit_is_refused_naming_what_fills_it(tmp_path: Path)
     # the k=999 (< horizon 1000, so not refused by the bound) on 200 x 1000 demonstration steps
     cfg = compose_config(["env=rovermaze_u", "algo=bc", "window.k=999", "max_memory_gb=8", f"run_root={tmp_path}"])
     validate_config(cfg)
-    with pytest.raises(ConfigValueError, match=r"needs an estimated 1\d\.\d GB of memory \(encoded demonstrations "
-                                               r"\(demos\.episodes x env\.horizon x window\.k\) 1\d\.\d GB") as error:
+    with pytest.raises(
+        ConfigValueError,
+        match=r"needs an estimated 1\d\.\d GB of memory \(encoded demonstrations "
+        r"\(demos\.episodes x env\.horizon x window\.k\) 1\d\.\d GB",
+    ) as error:
         check_run_fits(cfg)
     assert "8.0 GB are available" in str(error.value) and "\n" not in str(error.value)
     assert not any(tmp_path.iterdir())

@@ -87,15 +87,17 @@ def test_loads_by_id_under_minari_datasets_path(exported, monkeypatch):
     assert load_minari_demonstrations(DATASET_ID).shape == load_demonstrations(ours).shape
 
 
-@pytest.mark.xfail(strict=True, reason="torchrl 0.14.1 MinariExperienceReplay writes its data with memmap_like, "
-                   "which keeps shapes, not values: every tensor it returns is zero")
+@pytest.mark.xfail(
+    strict=True,
+    reason="torchrl 0.14.1 MinariExperienceReplay writes its data with memmap_like, "
+    "which keeps shapes, not values: every tensor it returns is zero",
+)
 def test_through_torchrl_minari_experience_replay(exported, tmp_path, monkeypatch):
     from torchrl.data.datasets import MinariExperienceReplay
 
     ours, directory = exported
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(directory.parent.parent))
-    replay = MinariExperienceReplay(DATASET_ID, batch_size=4, root=tmp_path, download=False,
-                                    load_from_local_minari=True)
+    replay = MinariExperienceReplay(DATASET_ID, batch_size=4, root=tmp_path, download=False, load_from_local_minari=True)
     loaded = from_minari_replay(replay[:].to_tensordict(), read_minari_metadata(directory)["torchrl_causal"])
     _assert_same(_encoded(loaded), _encoded(load_demonstrations(ours)))
 
@@ -126,6 +128,7 @@ def test_refuses_a_missing_key(copy):
     def drop(file):
         for episode in file.values():
             del episode["observations"]["latent"]["O"]
+
     _edit(copy, drop)
     with pytest.raises(DatasetError, match="latent"):
         load_minari_demonstrations(copy)
@@ -135,6 +138,7 @@ def test_refuses_modified_data(copy):
     def nudge(file):
         values = file["episode_1"]["observations"]["P"]
         values[5] = values[5] + 1e-3
+
     _edit(copy, nudge)
     with pytest.raises(DatasetError, match="checksum"):
         load_minari_demonstrations(copy)

@@ -60,10 +60,15 @@ def test_residual_mlp_is_projection_blocks_head_on_concatenated_inputs():
 
 
 @settings(max_examples=25, deadline=None)
-@given(samples=st.integers(2, 5), batch=st.integers(1, 6), obs_dim=st.integers(1, 9), act_dim=st.integers(1, 3),
-       expanded=st.sampled_from(["observation", "action", "both"]), seed=st.integers(0, 2**16))
-def test_residual_mlp_on_an_expanded_input_equals_the_materialised_input(samples, batch, obs_dim, act_dim,
-                                                                        expanded, seed):
+@given(
+    samples=st.integers(2, 5),
+    batch=st.integers(1, 6),
+    obs_dim=st.integers(1, 9),
+    act_dim=st.integers(1, 3),
+    expanded=st.sampled_from(["observation", "action", "both"]),
+    seed=st.integers(0, 2**16),
+)
+def test_residual_mlp_on_an_expanded_input_equals_the_materialised_input(samples, batch, obs_dim, act_dim, expanded, seed):
     # IQ-Learn's K-sample pass expands each state beside K actions; the shared-input
     # projection must give the values and gradients of the plain concatenation. In float64
     # the two summation orders agree far inside the default tolerance for any weights; in

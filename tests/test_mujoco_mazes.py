@@ -101,9 +101,7 @@ def test_gust_pushes_the_torso_along_its_direction(env_cls):
 def test_deploy_compass_is_train_compass_rotated(env_cls, strength):
     keys = ("P", "J", "W")
     train = _rollout(env_cls("medium", batch_size=2, regime="train", seed=1), 3, keys=keys)
-    deploy = _rollout(
-        env_cls("medium", batch_size=2, regime="deploy", confounding_strength=strength, seed=1), 3, keys=keys
-    )
+    deploy = _rollout(env_cls("medium", batch_size=2, regime="deploy", confounding_strength=strength, seed=1), 3, keys=keys)
     torch.testing.assert_close(deploy["P"], train["P"], rtol=0, atol=0)  # the regime only moves W
     torch.testing.assert_close(deploy["J"], train["J"], rtol=0, atol=0)
     angle = strength * math.pi

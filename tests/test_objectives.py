@@ -101,7 +101,7 @@ def squashed_sample(actor, obs: torch.Tensor, sample_shape: tuple = ()) -> tuple
     half_range = (HIGH - LOW) / 2
     action = (HIGH + LOW) / 2 + half_range * torch.tanh(pre)
     gaussian = -((pre - loc) ** 2) / (2 * scale**2) - scale.log() - 0.5 * math.log(2 * math.pi)
-    log_det = torch.log1p(-torch.tanh(pre) ** 2) + math.log(half_range)
+    log_det = torch.log1p(-(torch.tanh(pre) ** 2)) + math.log(half_range)
     return action, (gaussian - log_det).sum(-1, keepdim=True)
 
 
@@ -118,10 +118,7 @@ def test_sqil_critic_regresses_on_relabelled_soft_bellman_target(frozen_noise, r
     )
     reward = EXPERT.float()
     y = reward + GAMMA * (~TERMINATED).float() * (min_target_q - alpha * next_log_prob)
-    expected = sum(
-        ((critic(loss, loss.qvalue_network_params, j, batch["observation"], batch["action"]) - y) ** 2).mean()
-        for j in (0, 1)
-    )
+    expected = sum(((critic(loss, loss.qvalue_network_params, j, batch["observation"], batch["action"]) - y) ** 2).mean() for j in (0, 1))
     torch.testing.assert_close(out["loss_qvalue"], expected, rtol=1e-5, atol=1e-6)
     assert out["alpha"].item() == pytest.approx(alpha, rel=1e-5)
     assert torch.equal(batch["next", "reward"], torch.full((4, 1), 100.0)), "the caller's batch was modified"
@@ -138,8 +135,7 @@ def test_iq_learn_critic_loss_matches_chi_squared_objective(frozen_noise, num_va
     next_obs = batch["next", "observation"]
     actions, log_probs = squashed_sample(actor, next_obs, (num_value_samples,))
     soft_values = [
-        torch.minimum(*(critic(loss, loss.target_qvalue_network_params, j, next_obs, actions[m]) for j in (0, 1)))
-        - alpha * log_probs[m]
+        torch.minimum(*(critic(loss, loss.target_qvalue_network_params, j, next_obs, actions[m]) for j in (0, 1))) - alpha * log_probs[m]
         for m in range(num_value_samples)
     ]
     v_next = torch.stack(soft_values).mean(0)
@@ -193,8 +189,7 @@ def test_online_iq_learn_adds_the_value_term_on_the_online_critic(frozen_noise, 
     discount = GAMMA * (~TERMINATED).float()
     expected = 0.0
     for j in (0, 1):
-        soft = torch.stack([critic(loss, params, j, states, actions[m]) - alpha * log_probs[m]
-                            for m in range(num_value_samples)]).mean(0)
+        soft = torch.stack([critic(loss, params, j, states, actions[m]) - alpha * log_probs[m] for m in range(num_value_samples)]).mean(0)
         value, next_value = soft[:n], soft[n:]
         r_hat = critic(loss, params, j, obs, batch["action"]) - discount * next_value
         expected = expected - r_hat[EXPERT].mean() + (value - discount * next_value).mean() + 0.5 * (r_hat**2).mean()
@@ -239,11 +234,11 @@ def test_the_goal_transition_bootstraps_through_the_absorbing_state(frozen_noise
     next_action, next_log_prob = squashed_sample(actor, next_obs, () if cls is SQILLoss else (1,))
     next_action, next_log_prob = next_action.reshape(5, ACT_DIM), next_log_prob.reshape(5, 1)
     target = loss.target_qvalue_network_params
-    next_value = torch.minimum(*(_absorbing_critic(loss, target, j, next_obs, next_flag, next_action)
-                                 for j in (0, 1))) - alpha * next_log_prob
+    next_value = (
+        torch.minimum(*(_absorbing_critic(loss, target, j, next_obs, next_flag, next_action) for j in (0, 1))) - alpha * next_log_prob
+    )
     expert = batch["expert"]
-    q = [_absorbing_critic(loss, loss.qvalue_network_params, j, batch["observation"], batch["absorbing"],
-                           batch["action"]) for j in (0, 1)]
+    q = [_absorbing_critic(loss, loss.qvalue_network_params, j, batch["observation"], batch["absorbing"], batch["action"]) for j in (0, 1)]
     # No row is terminal any more: the goal transition and the absorbing loop bootstrap with gamma.
     if cls is SQILLoss:
         y = expert.float() + GAMMA * next_value
@@ -260,13 +255,15 @@ def test_absorbing_transitions_follow_every_terminal_one():
     n = 9
     terminated = torch.rand(n, 1, generator=g) < 0.4
     truncated = ~terminated & (torch.rand(n, 1, generator=g) < 0.5)
-    batch = TensorDict({
-        "observation": torch.randn(n, OBS_DIM, generator=g),
-        "action": torch.rand(n, ACT_DIM, generator=g),
-        "expert": torch.rand(n, 1, generator=g) < 0.5,
-        "next": {"observation": torch.randn(n, OBS_DIM, generator=g), "terminated": terminated,
-                 "done": terminated | truncated},
-    }, [n])
+    batch = TensorDict(
+        {
+            "observation": torch.randn(n, OBS_DIM, generator=g),
+            "action": torch.rand(n, ACT_DIM, generator=g),
+            "expert": torch.rand(n, 1, generator=g) < 0.5,
+            "next": {"observation": torch.randn(n, OBS_DIM, generator=g), "terminated": terminated, "done": terminated | truncated},
+        },
+        [n],
+    )
     original = batch.clone()
     out = add_absorbing_transitions(batch)
     assert (batch == original).all(), "the input must not change"
@@ -316,11 +313,14 @@ def _moved(grads) -> bool:
 
 
 @pytest.mark.parametrize("cls, kwargs", [(SQILLoss, {}), (IQLearnLoss, {}), (IQLearnLoss, {"variant": "iq_learn"})])
-@pytest.mark.parametrize("term, actor_moves, critic_moves, alpha_moves", [
-    ("loss_actor", True, False, False),
-    ("loss_qvalue", False, True, False),
-    ("loss_alpha", False, False, True),
-])
+@pytest.mark.parametrize(
+    "term, actor_moves, critic_moves, alpha_moves",
+    [
+        ("loss_actor", True, False, False),
+        ("loss_qvalue", False, True, False),
+        ("loss_alpha", False, False, True),
+    ],
+)
 def test_each_loss_term_reaches_only_its_own_parameters(cls, kwargs, term, actor_moves, critic_moves, alpha_moves):
     loss, _ = make_loss(cls, alpha=0.05, **kwargs)
     loss.zero_grad(set_to_none=True)
@@ -409,8 +409,16 @@ def _quadratic(u, w):
 
 def _pairs(n: int, seed: int = 0) -> tuple[TensorDict, TensorDict]:
     g = torch.Generator().manual_seed(seed)
-    make = lambda: TensorDict({"observation": torch.randn(n, OBS_DIM, generator=g),  # noqa: E731
-                               "action": torch.rand(n, ACT_DIM, generator=g) - 0.5}, [n])
+
+    def make() -> TensorDict:
+        return TensorDict(
+            {
+                "observation": torch.randn(n, OBS_DIM, generator=g),
+                "action": torch.rand(n, ACT_DIM, generator=g) - 0.5,
+            },
+            [n],
+        )
+
     return make(), make()
 
 
@@ -510,8 +518,9 @@ def test_only_the_positive_reward_pays_for_staying_out_of_a_terminal_goal(reward
     value = make_gail_value_network(OBS_DIM, hidden=8)
     _zero_output(discriminator)  # D = 1/2 everywhere: the discriminator cannot tell
     _zero_output(value)
-    gail = make_gail_losses(make_tanh_gaussian_actor(OBS_DIM, SPEC, hidden=8, num_blocks=1, dropout=0.0), value,
-                            discriminator, reward=reward)
+    gail = make_gail_losses(
+        make_tanh_gaussian_actor(OBS_DIM, SPEC, hidden=8, num_blocks=1, dropout=0.0), value, discriminator, reward=reward
+    )
     horizon, gamma, lmbda = 6, 0.99, 0.95
     with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM):
         rollout = gail.policy.actor_network(_terminal_rollout(horizon))
@@ -532,8 +541,13 @@ def test_absorbing_discriminator_adds_the_absorbing_return_at_termination():
     torch.manual_seed(0)
     gamma = 0.9
     discriminator = make_gail_discriminator(OBS_DIM + 1, SPEC, hidden=8)
-    gail = make_gail_losses(make_tanh_gaussian_actor(OBS_DIM, SPEC, hidden=8, num_blocks=1, dropout=0.0),
-                            make_gail_value_network(OBS_DIM, hidden=8), discriminator, gamma=gamma, absorbing=True)
+    gail = make_gail_losses(
+        make_tanh_gaussian_actor(OBS_DIM, SPEC, hidden=8, num_blocks=1, dropout=0.0),
+        make_gail_value_network(OBS_DIM, hidden=8),
+        discriminator,
+        gamma=gamma,
+        absorbing=True,
+    )
     horizon = 4
     with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM):
         rollout = gail.reward(gail.policy.actor_network(_terminal_rollout(horizon)))
@@ -542,8 +556,7 @@ def test_absorbing_discriminator_adds_the_absorbing_return_at_termination():
         flat = rollout.reshape(-1)
         inputs = torch.cat([flat["observation"], torch.zeros(horizon, 1)], -1)
         logits = discriminator.module(inputs, flat["action"])
-        absorbing_logit = discriminator.module(torch.cat([torch.zeros(1, OBS_DIM), torch.ones(1, 1)], -1),
-                                               torch.zeros(1, ACT_DIM))
+        absorbing_logit = discriminator.module(torch.cat([torch.zeros(1, OBS_DIM), torch.ones(1, 1)], -1), torch.zeros(1, ACT_DIM))
     expected = logits.clone()
     expected[-1] += gamma / (1 - gamma) * absorbing_logit[0]
     torch.testing.assert_close(rollout["next", "reward"][0], expected)
@@ -555,10 +568,17 @@ def test_ppo_ratio_is_one_before_any_update_when_rollout_and_loss_share_the_poli
     torch.manual_seed(0)
     actor = make_tanh_gaussian_actor(OBS_DIM, SPEC, hidden=32, num_blocks=2, dropout=0.05, log_std_init=-1.5)
     gail = make_gail_losses(actor, make_gail_value_network(OBS_DIM, hidden=8), make_gail_discriminator(OBS_DIM, SPEC, hidden=8))
-    rollout = TensorDict({"observation": torch.randn(4, 50, OBS_DIM),
-                          "next": {"observation": torch.randn(4, 50, OBS_DIM),
-                                   "done": torch.zeros(4, 50, 1, dtype=torch.bool),
-                                   "terminated": torch.zeros(4, 50, 1, dtype=torch.bool)}}, [4, 50])
+    rollout = TensorDict(
+        {
+            "observation": torch.randn(4, 50, OBS_DIM),
+            "next": {
+                "observation": torch.randn(4, 50, OBS_DIM),
+                "done": torch.zeros(4, 50, 1, dtype=torch.bool),
+                "terminated": torch.zeros(4, 50, 1, dtype=torch.bool),
+            },
+        },
+        [4, 50],
+    )
     with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM), eval_mode(actor):
         rollout = actor(rollout)
     with torch.no_grad():

@@ -28,8 +28,10 @@ def test_signal_checkpoints_then_reaches_the_schedulers_handler_and_the_run_resu
 
     previous = signal.signal(number, scheduler)
     try:
-        with _interrupt_at(get_class(cfg.algo.trainer), 2, number), \
-                pytest.raises(RunInterrupted, match=f"interrupted by {signal.Signals(number).name} at 2/4") as stop:
+        with (
+            _interrupt_at(get_class(cfg.algo.trainer), 2, number),
+            pytest.raises(RunInterrupted, match=f"interrupted by {signal.Signals(number).name} at 2/4") as stop,
+        ):
             run(cfg)
     finally:
         signal.signal(number, previous)

@@ -102,7 +102,8 @@ def check_against_markdown(table: Table, path: Path) -> int:
     for row in table[1:]:
         assert row[0] in source, f"README row {row[0]!r} is not in {path.name}"
         assert [_leading_number(c) for c in row[1:]] == [_leading_number(c) for c in source[row[0]]], (
-            f"README row {row}, {path.name}: {source[row[0]]}")
+            f"README row {row}, {path.name}: {source[row[0]]}"
+        )
         checked += len(row) - 1
     return checked
 
@@ -110,8 +111,7 @@ def check_against_markdown(table: Table, path: Path) -> int:
 def _figure_tables(document: Path) -> tuple[list[Table], list[Table]]:
     """The results tables of ``document`` (first column ``regime`` or ``strength``): all, and those without a marker."""
     lines = document.read_text().splitlines()
-    marked_headers = {index for index, _ in markdown_tables(lines)
-                      if any(MARKER.search(line) for line in lines[max(0, index - 2):index])}
+    marked_headers = {index for index, _ in markdown_tables(lines) if any(MARKER.search(line) for line in lines[max(0, index - 2) : index])}
     figures = [(index, rows) for index, rows in markdown_tables(lines) if rows[0][0] in ("regime", "strength")]
     return [rows for _, rows in figures], [rows for index, rows in figures if index not in marked_headers]
 

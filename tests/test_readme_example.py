@@ -14,7 +14,7 @@ README = Path(__file__).resolve().parents[1] / "README.md"
 def readme_example() -> str:
     """The first Python block after the README's "Composing" heading."""
     text = README.read_text()
-    section = text[text.index("## Composing `CausalWindowTransform`"):]
+    section = text[text.index("## Composing `CausalWindowTransform`") :]
     return re.search(r"```python\n(.*?)```", section, flags=re.S).group(1)
 
 

@@ -37,15 +37,28 @@ from torchrl_causal.experiment import RunDirectory
 
 # Appendix F, AntMaze-Medium column: raw E[Y] and success rate (%), deployment regime.
 PAPER_RAW = {
-    "expert": (-104.0, 87.6), "c_bc": (-125.2, 77.9), "c_gail": (-135.8, 74.1), "c_sqil": (-99.6, 90.7),
-    "c_iq_learn": (-118.2, 84.3), "bc": (-375.3, 0.0), "gail": (-364.9, 0.0), "sqil": (-370.7, 0.0),
+    "expert": (-104.0, 87.6),
+    "c_bc": (-125.2, 77.9),
+    "c_gail": (-135.8, 74.1),
+    "c_sqil": (-99.6, 90.7),
+    "c_iq_learn": (-118.2, 84.3),
+    "bc": (-375.3, 0.0),
+    "gail": (-364.9, 0.0),
+    "sqil": (-370.7, 0.0),
     "iq_learn": (-372.5, 0.0),
 }
 # Table 1, AntMaze-Medium: normalised E[Y] (the paper rounds the raw values first, so the
 # last digit can differ by 0.1) and success-rate standard errors (%).
 PAPER_NORMALISED = {
-    "expert": 271.4, "c_bc": 250.1, "c_gail": 239.5, "c_sqil": 275.8, "c_iq_learn": 257.1,
-    "bc": 0.0, "gail": 10.4, "sqil": 4.7, "iq_learn": 2.8,
+    "expert": 271.4,
+    "c_bc": 250.1,
+    "c_gail": 239.5,
+    "c_sqil": 275.8,
+    "c_iq_learn": 257.1,
+    "bc": 0.0,
+    "gail": 10.4,
+    "sqil": 4.7,
+    "iq_learn": 2.8,
 }
 PAPER_SUCCESS_SE = {"expert": 1.0, "c_bc": 1.3, "c_gail": 1.4, "c_sqil": 0.9, "c_iq_learn": 1.2, "bc": 0.0}
 
@@ -58,25 +71,46 @@ def _episodes(mean_return: float, success_percent: float, n: int, spread: float 
     return successes, returns, lengths
 
 
-def make_fake_run(root: Path, label: str, *, seed: int = 0, env: str = "antmaze_medium", k: int = 10,
-                  horizon: int = 1000, strength: float = 1.0, deploy=(None, None), train=(None, None),
-                  episodes: int = 1000, curve: bool = True, status: str = "complete") -> Path:
+def make_fake_run(
+    root: Path,
+    label: str,
+    *,
+    seed: int = 0,
+    env: str = "antmaze_medium",
+    k: int = 10,
+    horizon: int = 1000,
+    strength: float = 1.0,
+    deploy=(None, None),
+    train=(None, None),
+    episodes: int = 1000,
+    curve: bool = True,
+    status: str = "complete",
+) -> Path:
     """A run directory as the trainers write it: resolved config, status, eval JSONs, curve CSV."""
     causal = label.startswith("c_")
     algo = label[2:] if causal else label
     run_dir = root / env / f"h{horizon}-cs{strength}-k{k}" / label / f"seed{seed}"
     (run_dir / "eval").mkdir(parents=True)
-    OmegaConf.save(OmegaConf.create({
-        "env": {"name": env, "horizon": horizon, "confounding_strength": strength},
-        "window": {"k": k, "window_matched": False}, "algo": {"name": algo}, "causal": causal, "seed": seed,
-    }), run_dir / "config.yaml")
+    OmegaConf.save(
+        OmegaConf.create(
+            {
+                "env": {"name": env, "horizon": horizon, "confounding_strength": strength},
+                "window": {"k": k, "window_matched": False},
+                "algo": {"name": algo},
+                "causal": causal,
+                "seed": seed,
+            }
+        ),
+        run_dir / "config.yaml",
+    )
     (run_dir / "status.json").write_text(json.dumps({"status": status, "progress": 4, "total": 4, "unit": "epochs"}))
     for regime, (mean_return, success) in (("deploy", deploy), ("train", train)):
         if mean_return is None:
             continue
         s, r, n = _episodes(mean_return, success, episodes)
-        result = EvaluationResult(regime, s, r, n, seeds=[seed],
-                                  trajectories=[[[0.0, 0.0], [1.0, 1.0], [2.0, 1.5]]] if regime == "deploy" else ())
+        result = EvaluationResult(
+            regime, s, r, n, seeds=[seed], trajectories=[[[0.0, 0.0], [1.0, 1.0], [2.0, 1.5]]] if regime == "deploy" else ()
+        )
         data = result.to_dict()
         data["maze"] = {"walls": [[-1.0, -1.0, 3.0, -0.5]], "goal": [2.0, 2.0], "start": [0.0, 0.0]}
         eval_path(run_dir, regime).write_text(json.dumps(data))
@@ -96,7 +130,7 @@ def paper_runs(tmp_path: Path) -> Path:
 
 
 def test_normalised_table_reproduces_paper_table1(paper_runs: Path) -> None:
-    (setting, table), = aggregate(load_runs(paper_runs)).items()
+    ((setting, table),) = aggregate(load_runs(paper_runs)).items()
     assert setting.env == "antmaze_medium" and setting.k == 10
     normalised = normalised_returns(table)
     for label, expected in PAPER_NORMALISED.items():
@@ -124,8 +158,9 @@ def test_report_writes_markdown_csv_and_figures(paper_runs: Path, tmp_path: Path
 
     text = report.markdown.read_text()
     header = next(line for line in text.splitlines() if line.startswith("|  | Expert"))
-    assert header.split("|")[2:-1] == [" " + h + " " for h in
-                                       ("Expert", "C-BC", "C-GAIL", "C-SQIL", "C-IQ-Learn", "BC", "GAIL", "SQIL", "IQ-Learn")]
+    assert header.split("|")[2:-1] == [
+        " " + h + " " for h in ("Expert", "C-BC", "C-GAIL", "C-SQIL", "C-IQ-Learn", "BC", "GAIL", "SQIL", "IQ-Learn")
+    ]
     assert "**275.7** ± 50.0" in text  # best non-expert normalised E[Y] in bold (C-SQIL)
     assert "**90.7** ± 0.9" in text
     assert "python -m torchrl_causal.train ..." in text
@@ -171,8 +206,7 @@ def test_effect_targets_set_the_checks_thresholds(paper_runs: Path, tmp_path: Pa
 
 def test_seeds_pool_and_ablation_plots(tmp_path: Path) -> None:
     for seed in (0, 1):
-        make_fake_run(tmp_path, "c_sqil", seed=seed, deploy=(-100.0 - seed * 10, 80.0 + seed * 10),
-                      train=(-90.0, 90.0), episodes=100)
+        make_fake_run(tmp_path, "c_sqil", seed=seed, deploy=(-100.0 - seed * 10, 80.0 + seed * 10), train=(-90.0, 90.0), episodes=100)
     for k, success in ((0, 20.0), (2, 85.0)):
         make_fake_run(tmp_path, "c_sqil", k=k, deploy=(-150.0, success), train=(-90.0, 90.0), episodes=100)
     aggregated = aggregate(load_runs(tmp_path))
@@ -192,16 +226,17 @@ def test_seeds_pool_and_ablation_plots(tmp_path: Path) -> None:
 
 def test_across_seeds_table_has_each_seed_and_the_seed_standard_error(tmp_path: Path) -> None:
     for seed, deploy_success in ((0, 80.0), (1, 90.0), (2, 100.0)):
-        make_fake_run(tmp_path, "c_sqil", seed=seed, deploy=(-100.0, deploy_success), train=(-90.0, 90.0),
-                      episodes=100)
+        make_fake_run(tmp_path, "c_sqil", seed=seed, deploy=(-100.0, deploy_success), train=(-90.0, 90.0), episodes=100)
     make_fake_run(tmp_path, "sqil", seed=0, deploy=(-300.0, 0.0), train=(-90.0, 95.0), episodes=100)
     table = seeds_markdown(load_runs(tmp_path))
     c_sqil = next(line for line in table.splitlines() if line.startswith("| C-SQIL"))
     # deploy: pooled 270 / 300 episodes; mean 90, sample std 10, SE 10 / sqrt(3) = 5.77; IQM of
     # 3 seeds = their mean; bootstrap 2.5% of the 27 resample means: 0.65 of the way from
     # 80 (one resample) to 83.3 ((80, 80, 90), three resamples) = 82.2.
-    assert c_sqil == ("| C-SQIL | 0: 90.0, 1: 90.0, 2: 90.0 | 90.0 | 90.0 ± 0.0 | 90.0 [90.0, 90.0] "
-                      "| 0: 80.0, 1: 90.0, 2: 100.0 | 90.0 | 90.0 ± 5.8 | 90.0 [82.2, 97.8] |")
+    assert c_sqil == (
+        "| C-SQIL | 0: 90.0, 1: 90.0, 2: 90.0 | 90.0 | 90.0 ± 0.0 | 90.0 [90.0, 90.0] "
+        "| 0: 80.0, 1: 90.0, 2: 100.0 | 90.0 | 90.0 ± 5.8 | 90.0 [82.2, 97.8] |"
+    )
     assert "| SQIL | 0: 95.0 | 95.0 | 95.0 | 95.0 | 0: 0.0 | 0.0 | 0.0 | 0.0 |" in table  # one seed: no spread
     assert seed_spread([0.2, 0.4]) == pytest.approx((0.3, 0.1))
     with pytest.raises(ValueError, match="at least one"):
@@ -268,8 +303,9 @@ def test_a_run_training_again_is_left_out_with_a_warning(tmp_path: Path, caplog)
 def test_status_lists_every_run_with_its_state(tmp_path: Path, capsys) -> None:
     make_fake_run(tmp_path, "c_sqil", deploy=(-100.0, 90.0), train=(-100.0, 87.0))
     failed = make_fake_run(tmp_path, "sqil", status="failed", curve=False)
-    (failed / "status.json").write_text(json.dumps({"status": "failed", "error": "ValueError: bad", "progress": 3,
-                                                    "total": 10, "unit": "rounds"}))
+    (failed / "status.json").write_text(
+        json.dumps({"status": "failed", "error": "ValueError: bad", "progress": 3, "total": 10, "unit": "rounds"})
+    )
     stale = make_fake_run(tmp_path, "c_bc", deploy=(-100.0, 50.0), train=(-100.0, 50.0), status="running")
     (stale / ".hydra").mkdir()
     (stale / ".hydra" / "config.yaml").write_text("{}")
@@ -281,10 +317,12 @@ def test_status_lists_every_run_with_its_state(tmp_path: Path, capsys) -> None:
     RunDirectory(failed).record_attempt({**attempt, "demonstrations": "d2", "source": "b"}, progress=2)
     rows = {row["run"].split("/")[-2]: row for row in run_statuses(tmp_path)}
     assert sorted(rows) == ["c_bc", "c_sqil", "sqil"]
-    assert [rows[label]["attempts"] for label in ("c_sqil", "c_bc", "sqil")] == [
-        "—", "2", "3 (source, demonstrations changed)"]
+    assert [rows[label]["attempts"] for label in ("c_sqil", "c_bc", "sqil")] == ["—", "2", "3 (source, demonstrations changed)"]
     assert (rows["c_sqil"]["status"], rows["c_sqil"]["progress"], rows["c_sqil"]["deploy success %"]) == (
-        "complete", "4 / 4 epochs (100%)", "90.0")
+        "complete",
+        "4 / 4 epochs (100%)",
+        "90.0",
+    )
     assert rows["sqil"]["status"] == "failed: ValueError: bad" and rows["sqil"]["progress"] == "3 / 10 rounds (30%)"
     # no process holds its lock: the "running" it recorded is a dead writer's; its evaluations are not shown
     assert (rows["c_bc"]["status"], rows["c_bc"]["deploy success %"]) == ("killed", "—")
@@ -300,12 +338,12 @@ def test_the_report_of_an_archive_equals_the_report_of_its_runs(paper_runs: Path
     (c_sqil / "checkpoints" / "best.pt").write_bytes(bytes(64))
     (c_sqil / "replay").mkdir()
     (c_sqil / "replay" / "observation.memmap").write_bytes(bytes(64))
-    unfinished = make_fake_run(paper_runs, "sqil", seed=1, deploy=(-300.0, 0.0), train=(-100.0, 90.0),
-                               status="interrupted")
+    unfinished = make_fake_run(paper_runs, "sqil", seed=1, deploy=(-300.0, 0.0), train=(-100.0, 90.0), status="interrupted")
     archive = tmp_path_factory.mktemp("archive")
     archived = archive_runs(paper_runs, archive)
     assert sorted(p.relative_to(archive) for p in archived) == sorted(
-        p.parent.relative_to(paper_runs) for p in paper_runs.rglob("config.yaml") if p.parent != unfinished)
+        p.parent.relative_to(paper_runs) for p in paper_runs.rglob("config.yaml") if p.parent != unfinished
+    )
     assert not list(archive.rglob("*.pt")) and not list(archive.rglob("*.memmap"))
     assert (archive / c_sqil.relative_to(paper_runs) / "logs" / "scalars" / "eval" / "train_return.csv").is_file()
     reports = tmp_path_factory.mktemp("reports")
@@ -318,8 +356,7 @@ def test_the_report_of_an_archive_equals_the_report_of_its_runs(paper_runs: Path
 def test_archiving_again_replaces_a_runs_record_and_keeps_the_others(tmp_path_factory) -> None:
     root, archive = tmp_path_factory.mktemp("runs"), tmp_path_factory.mktemp("archive")
     run = make_fake_run(root, "c_bc", deploy=(-100.0, 50.0), train=(-100.0, 50.0), episodes=4)
-    elsewhere = make_fake_run(tmp_path_factory.mktemp("other_machine"), "bc", deploy=(-300.0, 0.0),
-                              train=(-100.0, 75.0), episodes=4)
+    elsewhere = make_fake_run(tmp_path_factory.mktemp("other_machine"), "bc", deploy=(-300.0, 0.0), train=(-100.0, 75.0), episodes=4)
     archive_runs(elsewhere.parents[3], archive)
     archive_runs(root, archive)
     eval_path(run, "deploy").write_text(json.dumps(EvaluationResult("deploy", [True] * 4, [-1.0] * 4, [9] * 4).to_dict()))
@@ -337,7 +374,8 @@ def test_archiving_again_replaces_a_runs_record_and_keeps_the_others(tmp_path_fa
     archive_runs(root, archive)
     assert not (archived / at_strength.relative_to(run)).exists()
     assert sorted(p.relative_to(archived) for p in archived.rglob("*") if p.is_file()) == sorted(
-        p.relative_to(run) for p in RunDirectory(run).record_files())
+        p.relative_to(run) for p in RunDirectory(run).record_files()
+    )
     with pytest.raises(ValueError, match="must not contain one another"):
         archive_runs(root, root / "archive")
     with pytest.raises(FileNotFoundError, match="does not exist"):
@@ -398,8 +436,9 @@ def test_a_run_replaces_the_carried_row_of_its_label(paper_runs: Path, tmp_path_
 
 
 def test_a_record_keeps_trajectory_positions_to_a_tenth_of_a_millimetre_and_every_metric_exactly() -> None:
-    result = EvaluationResult("deploy", [True, False], [-1.23456789, -2.5], [3, 4],
-                              trajectories=[[[0.123456789, -2.0000499], [1.00005001, 3.0]]])
+    result = EvaluationResult(
+        "deploy", [True, False], [-1.23456789, -2.5], [3, 4], trajectories=[[[0.123456789, -2.0000499], [1.00005001, 3.0]]]
+    )
     record = json.loads(json.dumps(result.to_dict()))
     assert record["trajectories"] == [[[0.1235, -2.0], [1.0001, 3.0]]]
     reloaded = EvaluationResult.from_dict(record)

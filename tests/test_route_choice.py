@@ -98,9 +98,7 @@ def test_deploy_wind_interpolates_with_strength():
 
 def _sampling_policy(probability, generator):
     """A TensorDict policy drawing X ~ Bern(probability(z, o, w)) from the env's keys."""
-    table = torch.tensor(
-        [[[float(probability(z, o, w)) for w in (0, 1)] for o in (0, 1)] for z in (0, 1)], dtype=torch.float32
-    )
+    table = torch.tensor([[[float(probability(z, o, w)) for w in (0, 1)] for o in (0, 1)] for z in (0, 1)], dtype=torch.float32)
 
     def act(td):
         z, o, w = (td.get(key).long() for key in ("Z", ("latent", "O"), "W"))
@@ -151,8 +149,7 @@ def test_behaviour_cloning_through_the_causal_window(causal, deploy_value):
     # The learned deterministic policy, read back as a function of (z, w), has the exact value.
     def learned(z, o, w):
         state = {"Z": torch.tensor([[float(z)]]), "W": torch.tensor([[float(w)]])}
-        probe = TensorDict({**state, "next": state, "action": torch.zeros(1, 1),
-                            "is_init": torch.ones(1, 1, dtype=torch.bool)}, [1])
+        probe = TensorDict({**state, "next": state, "action": torch.zeros(1, 1), "is_init": torch.ones(1, 1, dtype=torch.bool)}, [1])
         return float(model(transform.encode_trajectories(probe)["observation"]).item() > 0)
 
     assert route_choice_value(learned, DEPLOY) == deploy_value

@@ -50,5 +50,4 @@ def test_sampled_bootstrap_approaches_the_exact_one() -> None:
     exact = bootstrap_interval(values)
     sampled = bootstrap_interval(values, exact=False, reps=20_000, seed=1)
     assert sampled == pytest.approx(exact, abs=1.0)  # a range of 36 points
-    assert bootstrap_interval(values, exact=False, reps=2_000, seed=3) == \
-        bootstrap_interval(values, exact=False, reps=2_000, seed=3)
+    assert bootstrap_interval(values, exact=False, reps=2_000, seed=3) == bootstrap_interval(values, exact=False, reps=2_000, seed=3)

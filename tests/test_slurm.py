@@ -14,8 +14,9 @@ import pytest
 
 from torchrl_causal.experiment import compose_config
 
-pytest.importorskip("hydra_plugins.hydra_submitit_launcher",
-                    reason="hydra-submitit-launcher is not installed: pip install 'torchrl-causal[cluster]'")
+pytest.importorskip(
+    "hydra_plugins.hydra_submitit_launcher", reason="hydra-submitit-launcher is not installed: pip install 'torchrl-causal[cluster]'"
+)
 
 REPO = Path(__file__).resolve().parents[1]
 FAKE_SBATCH = """#!/bin/sh
@@ -54,11 +55,25 @@ def test_fake_sbatch_receives_a_sane_job(tmp_path: Path) -> None:
     for name, text in (("sbatch", FAKE_SBATCH.format(capture=capture)), ("srun", "#!/bin/sh\nexit 1\n")):
         (bin_dir / name).write_text(text)
         (bin_dir / name).chmod((bin_dir / name).stat().st_mode | stat.S_IXUSR)
-    env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
-           "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
-    command = [sys.executable, "-m", "torchrl_causal.train", "-m", "hydra/launcher=slurm",
-               "hydra.launcher.partition=gpu", "hydra.launcher.timeout_min=240", "threads=2", "collector_workers=2",
-               "env=route_choice", "algo=bc", f"run_root={tmp_path / 'runs'}"]
+    env = {
+        **os.environ,
+        "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
+        "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
+    }
+    command = [
+        sys.executable,
+        "-m",
+        "torchrl_causal.train",
+        "-m",
+        "hydra/launcher=slurm",
+        "hydra.launcher.partition=gpu",
+        "hydra.launcher.timeout_min=240",
+        "threads=2",
+        "collector_workers=2",
+        "env=route_choice",
+        "algo=bc",
+        f"run_root={tmp_path / 'runs'}",
+    ]
     done = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
     assert done.returncode != 0 and "a fake sbatch for tests" in done.stderr, done.stderr[-3000:]
     script = capture.read_text()

@@ -52,14 +52,17 @@ class TabularCritic(nn.Module):
 
 def chain_batch() -> TensorDict:
     one_hot = torch.eye(STATES)
-    rows = [(0, 1, True, False), (1, 2, True, False), (2, 3, True, False), (3, 6, True, True),
-            (4, 4, False, False), (5, 6, False, True)]
+    rows = [(0, 1, True, False), (1, 2, True, False), (2, 3, True, False), (3, 6, True, True), (4, 4, False, False), (5, 6, False, True)]
     state, nxt, expert, terminated = (torch.tensor(column) for column in zip(*rows))
-    return TensorDict({
-        "observation": one_hot[state], "action": torch.zeros(len(rows), 1), "expert": expert.unsqueeze(-1),
-        "next": {"observation": one_hot[nxt], "terminated": terminated.unsqueeze(-1),
-                 "done": terminated.unsqueeze(-1).clone()},
-    }, [len(rows)])
+    return TensorDict(
+        {
+            "observation": one_hot[state],
+            "action": torch.zeros(len(rows), 1),
+            "expert": expert.unsqueeze(-1),
+            "next": {"observation": one_hot[nxt], "terminated": terminated.unsqueeze(-1), "done": terminated.unsqueeze(-1).clone()},
+        },
+        [len(rows)],
+    )
 
 
 def fit_chain(cls, steps: int = 60, absorbing: bool = False, **kwargs) -> torch.Tensor:
@@ -71,8 +74,7 @@ def fit_chain(cls, steps: int = 60, absorbing: bool = False, **kwargs) -> torch.
     entry, which halves the step that is exact for it."""
     torch.manual_seed(0)
     actor = make_tanh_gaussian_actor(STATES, SPEC, hidden=4, num_blocks=1)
-    critic = TensorDictModule(TabularCritic(STATES + absorbing), in_keys=["observation", "action"],
-                              out_keys=["state_action_value"])
+    critic = TensorDictModule(TabularCritic(STATES + absorbing), in_keys=["observation", "action"], out_keys=["state_action_value"])
     loss = cls(actor, critic, absorbing=absorbing, **TINY_ALPHA, **kwargs)
     loss.make_value_estimator(gamma=GAMMA)
     batch = chain_batch()
@@ -141,12 +143,19 @@ def test_goal_value_is_checked() -> None:
 def _batch(n: int = 6, seed: int = 0) -> TensorDict:
     g = torch.Generator().manual_seed(seed)
     expert = torch.tensor([[True], [False], [True], [True], [False], [False]])[:n]
-    return TensorDict({
-        "observation": torch.randn(n, 3, generator=g), "action": torch.rand(n, 2, generator=g) * 2 - 1,
-        "expert": expert,
-        "next": {"observation": torch.randn(n, 3, generator=g), "terminated": torch.zeros(n, 1, dtype=torch.bool),
-                 "done": torch.zeros(n, 1, dtype=torch.bool)},
-    }, [n])
+    return TensorDict(
+        {
+            "observation": torch.randn(n, 3, generator=g),
+            "action": torch.rand(n, 2, generator=g) * 2 - 1,
+            "expert": expert,
+            "next": {
+                "observation": torch.randn(n, 3, generator=g),
+                "terminated": torch.zeros(n, 1, dtype=torch.bool),
+                "done": torch.zeros(n, 1, dtype=torch.bool),
+            },
+        },
+        [n],
+    )
 
 
 def _actor_and_loss(**kwargs):
@@ -198,8 +207,12 @@ def test_the_expert_value_scale_keeps_the_anchor_when_the_critics_value_is_near_
 def test_an_unknown_bc_scale_is_refused() -> None:
     spec = Bounded(-1.0, 1.0, shape=(2,))
     with pytest.raises(ValueError, match="bc_scale must be one of"):
-        SQILLoss(make_tanh_gaussian_actor(3, spec, hidden=8, num_blocks=1),
-                 make_qvalue_network(3, spec, hidden=8, num_blocks=1), bc_weight=0.4, bc_scale="mean_q")
+        SQILLoss(
+            make_tanh_gaussian_actor(3, spec, hidden=8, num_blocks=1),
+            make_qvalue_network(3, spec, hidden=8, num_blocks=1),
+            bc_weight=0.4,
+            bc_scale="mean_q",
+        )
 
 
 def test_behaviour_cloning_nll_is_the_tanh_gaussian_density_of_the_expert_actions() -> None:
@@ -234,8 +247,14 @@ def test_a_critic_step_moves_only_the_critics_and_the_targets() -> None:
 
     _, loss = _actor_and_loss()
     adam = partial(torch.optim.Adam, lr=1e-2)
-    update = ActorCriticUpdate(loss, actor_optimizer=adam, critic_optimizer=adam, alpha_optimizer=adam,
-                               target_update=partial(SoftUpdate, tau=0.5), max_grad_norm=1.0)
+    update = ActorCriticUpdate(
+        loss,
+        actor_optimizer=adam,
+        critic_optimizer=adam,
+        alpha_optimizer=adam,
+        target_update=partial(SoftUpdate, tau=0.5),
+        max_grad_norm=1.0,
+    )
     snapshot = {name: p.detach().clone() for name, p in loss.named_parameters()}
     targets = [t.clone() for t in loss.target_qvalue_network_params.values(True, True)]
     update.critic_step(_batch())
@@ -250,8 +269,14 @@ def test_the_update_sums_every_loss_term() -> None:
 
     _, loss = _actor_and_loss(bc_weight=0.4)
     adam = partial(torch.optim.Adam, lr=1e-2)
-    update = ActorCriticUpdate(loss, actor_optimizer=adam, critic_optimizer=adam, alpha_optimizer=adam,
-                               target_update=partial(SoftUpdate, tau=0.5), max_grad_norm=1.0)
+    update = ActorCriticUpdate(
+        loss,
+        actor_optimizer=adam,
+        critic_optimizer=adam,
+        alpha_optimizer=adam,
+        target_update=partial(SoftUpdate, tau=0.5),
+        max_grad_norm=1.0,
+    )
     torch.manual_seed(1)  # the same action samples in both forwards
     total, _ = update.losses(_batch())
     torch.manual_seed(1)
@@ -262,12 +287,32 @@ def test_the_update_sums_every_loss_term() -> None:
 
 
 RECIPE_TINY = [
-    "env=rovermaze_u", "env.horizon=220", "window.k=2", "algo=sqil", "causal=true", "+recipe=goal_valued_bc_anchored",
-    "progress_bar=false", "threads=1", "demos.episodes=6", "eval.episodes=4", "eval.num_envs=4",
-    "eval.final_episodes=8", "eval.trajectories=2", "algo.actor.hidden=16", "algo.actor.num_blocks=1",
-    "algo.critic.hidden=16", "algo.critic.num_blocks=1", "algo.total_steps=240", "algo.random_steps=80",
-    "algo.num_envs=2", "algo.frames_per_batch=40", "algo.batch_size=32", "algo.buffer_size=1000",
-    "algo.eval_every=120", "algo.warm_start.bc_updates=60", "algo.warm_start.critic_updates=20",
+    "env=rovermaze_u",
+    "env.horizon=220",
+    "window.k=2",
+    "algo=sqil",
+    "causal=true",
+    "+recipe=goal_valued_bc_anchored",
+    "progress_bar=false",
+    "threads=1",
+    "demos.episodes=6",
+    "eval.episodes=4",
+    "eval.num_envs=4",
+    "eval.final_episodes=8",
+    "eval.trajectories=2",
+    "algo.actor.hidden=16",
+    "algo.actor.num_blocks=1",
+    "algo.critic.hidden=16",
+    "algo.critic.num_blocks=1",
+    "algo.total_steps=240",
+    "algo.random_steps=80",
+    "algo.num_envs=2",
+    "algo.frames_per_batch=40",
+    "algo.batch_size=32",
+    "algo.buffer_size=1000",
+    "algo.eval_every=120",
+    "algo.warm_start.bc_updates=60",
+    "algo.warm_start.critic_updates=20",
 ]
 
 
@@ -315,17 +360,33 @@ def test_a_shipped_policy_directory_evaluates_as_its_run(tmp_path) -> None:
     from torchrl_causal.experiment import CheckpointError, RunDirectory, compose_config
     from torchrl_causal.lifecycle import evaluate_run, run
 
-    cfg = compose_config(["env=rovermaze_u", "env.horizon=40", "window.k=2", "algo=bc", f"run_root={tmp_path / 'runs'}",
-                          "progress_bar=false", "threads=1", "demos.episodes=6", "eval.episodes=4", "eval.num_envs=4",
-                          "eval.final_episodes=8", "eval.trajectories=0", "algo.actor.hidden=16",
-                          "algo.actor.num_blocks=1", "algo.epochs=2", "algo.batch_size=64", "algo.eval_every=1"])
+    cfg = compose_config(
+        [
+            "env=rovermaze_u",
+            "env.horizon=40",
+            "window.k=2",
+            "algo=bc",
+            f"run_root={tmp_path / 'runs'}",
+            "progress_bar=false",
+            "threads=1",
+            "demos.episodes=6",
+            "eval.episodes=4",
+            "eval.num_envs=4",
+            "eval.final_episodes=8",
+            "eval.trajectories=0",
+            "algo.actor.hidden=16",
+            "algo.actor.num_blocks=1",
+            "algo.epochs=2",
+            "algo.batch_size=64",
+            "algo.eval_every=1",
+        ]
+    )
     run(cfg)
     (shipped,) = archive_runs(tmp_path / "runs", tmp_path / "policies", policies=True)
     files = sorted(str(p.relative_to(shipped)) for p in shipped.rglob("*") if p.is_file())
     assert "checkpoints/best.pt" in files and "checkpoints/last.pt" not in files and "config.yaml" in files
     assert shipped.joinpath("checkpoints/best.pt").stat().st_size < 600_000
-    original, copy = (evaluate_run(path, "deploy", episodes=6, num_envs=3, seed=7, save=False)
-                      for path in (cfg.run_dir, shipped))
+    original, copy = (evaluate_run(path, "deploy", episodes=6, num_envs=3, seed=7, save=False) for path in (cfg.run_dir, shipped))
     assert copy.returns == original.returns and copy.successes == original.successes
     # A checkpoint that carries more than the policy is not shipped.
     best = RunDirectory(cfg.run_dir).best_checkpoint

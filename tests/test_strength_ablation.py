@@ -16,9 +16,23 @@ from torchrl_causal.lifecycle import run
 from torchrl_causal.experiment import compose_config
 
 EPISODES = 8
-TINY_BC = ["env=rovermaze_u", "env.horizon=40", "window.k=2", "algo=bc", "progress_bar=false", "threads=1",
-           "demos.episodes=6", "eval.episodes=4", "eval.num_envs=4", "eval.final_episodes=4", "algo.actor.hidden=16",
-           "algo.actor.num_blocks=1", "algo.epochs=2", "algo.batch_size=64", "algo.eval_every=2"]
+TINY_BC = [
+    "env=rovermaze_u",
+    "env.horizon=40",
+    "window.k=2",
+    "algo=bc",
+    "progress_bar=false",
+    "threads=1",
+    "demos.episodes=6",
+    "eval.episodes=4",
+    "eval.num_envs=4",
+    "eval.final_episodes=4",
+    "algo.actor.hidden=16",
+    "algo.actor.num_blocks=1",
+    "algo.epochs=2",
+    "algo.batch_size=64",
+    "algo.eval_every=2",
+]
 
 
 @pytest.fixture(scope="module")
@@ -62,8 +76,7 @@ def test_stored_records_are_read_back_not_evaluated_again(runs_root: Path, monke
 
 
 def test_the_report_has_one_row_per_algorithm_and_a_figure(runs_root: Path, tmp_path: Path, torch_threads) -> None:
-    path = ablation.main([f"runs={runs_root}", "strengths=[0,1]", f"episodes={EPISODES}", f"out={tmp_path}",
-                          "name=ablation", "threads=2"])
+    path = ablation.main([f"runs={runs_root}", "strengths=[0,1]", f"episodes={EPISODES}", f"out={tmp_path}", "name=ablation", "threads=2"])
     assert torch.get_num_threads() == 2
     text = path.read_text()
     assert "| Algorithm | Seeds | 0 | 1 |" in text and "| C-BC | 0 |" in text and "| BC | 0 |" in text
@@ -81,8 +94,7 @@ def test_bad_strengths_and_mixed_settings_are_refused(runs_root: Path, tmp_path:
         ablation.strength_ablation(mixed, (1.0,), EPISODES)
 
 
-def test_an_archive_gives_back_the_stored_records_without_the_checkpoints(runs_root: Path, tmp_path: Path,
-                                                                          monkeypatch) -> None:
+def test_an_archive_gives_back_the_stored_records_without_the_checkpoints(runs_root: Path, tmp_path: Path, monkeypatch) -> None:
     first = _by_label(ablation.strength_ablation(runs_root, (0.5,), EPISODES))
     archive_runs(runs_root, tmp_path / "archive")
     assert not list((tmp_path / "archive").rglob("*.pt"))
@@ -102,8 +114,7 @@ def test_notes_written_by_hand_survive_a_rerun(runs_root: Path, tmp_path: Path) 
     assert text.index("Why BC falls.") < text.index("| Algorithm |")
 
 
-def test_an_archived_run_without_a_record_is_left_out_at_every_strength_with_a_warning(
-        runs_root: Path, tmp_path: Path, caplog) -> None:
+def test_an_archived_run_without_a_record_is_left_out_at_every_strength_with_a_warning(runs_root: Path, tmp_path: Path, caplog) -> None:
     ablation.strength_ablation(runs_root, (0.5, 1.0), EPISODES)
     archive = tmp_path / "archive"
     archive_runs(runs_root, archive)

@@ -114,14 +114,15 @@ def _upward(edges: dict[str, set[str]]) -> list[str]:
         f"{module} -> {target}"
         for module, targets in edges.items()
         for target in targets
-        if _unit(module) != "__init__" and _unit(target) != _unit(module)
-        and FLOOR.get(_unit(target), len(LAYERS)) >= FLOOR[_unit(module)]
+        if _unit(module) != "__init__" and _unit(target) != _unit(module) and FLOOR.get(_unit(target), len(LAYERS)) >= FLOOR[_unit(module)]
     )
 
 
 def test_upward_finds_an_import_from_a_lower_floor() -> None:
-    edges = {f"{NAME}.trainers.bc": {f"{NAME}.experiment.builders", f"{NAME}.trainers.base"},
-             f"{NAME}.evaluation.metrics": {f"{NAME}.trainers.base"}}
+    edges = {
+        f"{NAME}.trainers.bc": {f"{NAME}.experiment.builders", f"{NAME}.trainers.base"},
+        f"{NAME}.evaluation.metrics": {f"{NAME}.trainers.base"},
+    }
     assert _upward(edges) == [f"{NAME}.evaluation.metrics -> {NAME}.trainers.base"]
 
 
@@ -148,7 +149,7 @@ def _cycle(edges: dict[str, set[str]]) -> list[str] | None:
                 state[path.pop()] = 2
                 stack.pop()
             elif state.get(nxt) == 1:
-                return path[path.index(nxt):] + [nxt]
+                return path[path.index(nxt) :] + [nxt]
             elif nxt not in state and nxt in edges:
                 state[nxt] = 1
                 path.append(nxt)
@@ -206,12 +207,18 @@ def _private_reads(source: str) -> list[str]:
             own.add(node.name)
         elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
             own.add(node.attr)
-    methods = [stmt.name for cls in ast.walk(tree) if isinstance(cls, ast.ClassDef)
-               for stmt in cls.body if isinstance(stmt, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    methods = [
+        stmt.name
+        for cls in ast.walk(tree)
+        if isinstance(cls, ast.ClassDef)
+        for stmt in cls.body
+        if isinstance(stmt, (ast.FunctionDef, ast.AsyncFunctionDef))
+    ]
     return [
         ast.unparse(node)
         for node in ast.walk(tree)
-        if isinstance(node, ast.Attribute) and PRIVATE.match(node.attr)
+        if isinstance(node, ast.Attribute)
+        and PRIVATE.match(node.attr)
         and (node.attr not in own or (_is_super(node.value) and methods.count(node.attr) < 2))
     ]
 
@@ -234,8 +241,7 @@ def test_private_reads_are_found() -> None:
 PUBLIC_UNDERSCORED = {"_asdict", "_replace", "_target_"}
 
 
-@pytest.mark.parametrize("path", [path for path in SOURCES if path.name != "compat.py"],
-                         ids=lambda p: str(p.relative_to(PACKAGE)))
+@pytest.mark.parametrize("path", [path for path in SOURCES if path.name != "compat.py"], ids=lambda p: str(p.relative_to(PACKAGE)))
 def test_private_names_of_libraries_and_other_modules_are_read_only_in_compat(path: Path) -> None:
     """TorchRL's (tensordict's, torch's, OmegaConf's) private names are read, and its
     private hooks overridden, only in ``compat.py``, which gives each a public name; no

@@ -38,17 +38,40 @@ from torchrl_causal.lifecycle import run
 from torchrl_causal.trainers import Trainer
 
 TINY = [
-    "progress_bar=false", "threads=1", "demos.episodes=6", "eval.episodes=4", "eval.num_envs=4",
-    "eval.final_episodes=8", "eval.trajectories=2",
+    "progress_bar=false",
+    "threads=1",
+    "demos.episodes=6",
+    "eval.episodes=4",
+    "eval.num_envs=4",
+    "eval.final_episodes=8",
+    "eval.trajectories=2",
 ]
 ALGO_TINY = {
     "bc": ["algo.actor.hidden=16", "algo.actor.num_blocks=1", "algo.epochs=3", "algo.batch_size=64", "algo.eval_every=2"],
-    "gail": ["algo.actor.hidden=16", "algo.actor.num_blocks=1", "algo.value.hidden=16", "algo.discriminator.hidden=16",
-             "algo.rounds=2", "algo.episodes_per_round=2", "algo.batch_size=32", "algo.discriminator_batch_size=32",
-             "algo.eval_every=1"],
-    "sqil": ["algo.actor.hidden=16", "algo.actor.num_blocks=1", "algo.critic.hidden=16", "algo.critic.num_blocks=1",
-             "algo.total_steps=240", "algo.random_steps=80", "algo.num_envs=2", "algo.frames_per_batch=40",
-             "algo.batch_size=32", "algo.buffer_size=1000", "algo.eval_every=120"],
+    "gail": [
+        "algo.actor.hidden=16",
+        "algo.actor.num_blocks=1",
+        "algo.value.hidden=16",
+        "algo.discriminator.hidden=16",
+        "algo.rounds=2",
+        "algo.episodes_per_round=2",
+        "algo.batch_size=32",
+        "algo.discriminator_batch_size=32",
+        "algo.eval_every=1",
+    ],
+    "sqil": [
+        "algo.actor.hidden=16",
+        "algo.actor.num_blocks=1",
+        "algo.critic.hidden=16",
+        "algo.critic.num_blocks=1",
+        "algo.total_steps=240",
+        "algo.random_steps=80",
+        "algo.num_envs=2",
+        "algo.frames_per_batch=40",
+        "algo.batch_size=32",
+        "algo.buffer_size=1000",
+        "algo.eval_every=120",
+    ],
     "expert": [],
 }
 ALGO_TINY["iq_learn"] = ALGO_TINY["sqil"] + ["algo.loss.num_value_samples=2"]
@@ -56,8 +79,7 @@ ENV_TINY = {"rovermaze_u": ["env=rovermaze_u", "env.horizon=40", "window.k=2"], 
 
 
 def tiny_config(root: Path, env: str, algo: str, causal: bool, *extra: str):
-    return compose_config([*ENV_TINY[env], f"algo={algo}", f"causal={causal}", f"run_root={root}", *TINY,
-                           *ALGO_TINY[algo], *extra])
+    return compose_config([*ENV_TINY[env], f"algo={algo}", f"causal={causal}", f"run_root={root}", *TINY, *ALGO_TINY[algo], *extra])
 
 
 def build_trainer(cfg) -> Trainer:
@@ -84,8 +106,7 @@ def trained_runs(tmp_path_factory) -> dict[str, Path]:
 @pytest.mark.parametrize("env", sorted(ENV_TINY))
 def test_every_algorithm_runs_checkpoints_and_evaluates(trained_runs, env: str) -> None:
     runs = load_runs(trained_runs[env])
-    assert sorted(r.label for r in runs) == sorted(
-        ["expert", "c_bc", "c_gail", "c_sqil", "c_iq_learn", "bc", "gail", "sqil", "iq_learn"])
+    assert sorted(r.label for r in runs) == sorted(["expert", "c_bc", "c_gail", "c_sqil", "c_iq_learn", "bc", "gail", "sqil", "iq_learn"])
     for record in runs:
         status = json.loads((record.path / "status.json").read_text())
         assert status["status"] == "complete"
@@ -141,15 +162,15 @@ def test_a_run_made_before_an_option_existed_is_still_its_run(trained_runs) -> N
         assert run(cfg)["deploy"].n_episodes == 8
         assert OmegaConf.load(config_file).window.drop == []  # the claim recorded the new key
         with pytest.raises(ConfigMismatchError, match=r"window\.drop: \[\] -> \['X'\]"):
-            RunDirectory(cfg.run_dir).claim(tiny_config(trained_runs["route_choice"], "route_choice", "bc", True,
-                                                         "window.drop=[X]"))
+            RunDirectory(cfg.run_dir).claim(tiny_config(trained_runs["route_choice"], "route_choice", "bc", True, "window.drop=[X]"))
     finally:
         config_file.write_text(stored)
 
 
 # (window.mode=exact is refused earlier now, as a non-imitable diagram, before the run's config is read.)
-@pytest.mark.parametrize("change", ["env.make.maze=medium", "algo.optimizer.lr=0.01", "algo.actor.hidden=32",
-                                    "algo.patience=3", "eval.final_episodes=9"])
+@pytest.mark.parametrize(
+    "change", ["env.make.maze=medium", "algo.optimizer.lr=0.01", "algo.actor.hidden=32", "algo.patience=3", "eval.final_episodes=9"]
+)
 def test_a_changed_config_is_refused_naming_the_key(trained_runs, change: str) -> None:
     cfg = tiny_config(trained_runs["rovermaze_u"], "rovermaze_u", "bc", True, change)
     config_file = Path(cfg.run_dir) / "config.yaml"
@@ -189,12 +210,19 @@ def test_a_run_held_by_another_process_is_refused_and_a_killed_holder_leaves_no_
     cfg = tiny_config(tmp_path, "route_choice", "bc", True)
     run_dir = Path(cfg.run_dir)
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time\n"
-         "from torchrl_causal.experiment import RunDirectory\n"
-         "with RunDirectory(sys.argv[1]).lock():\n"
-         "    print('held', flush=True)\n"
-         "    time.sleep(600)\n", str(run_dir)],
-        stdout=subprocess.PIPE, text=True)
+        [
+            sys.executable,
+            "-c",
+            "import sys, time\n"
+            "from torchrl_causal.experiment import RunDirectory\n"
+            "with RunDirectory(sys.argv[1]).lock():\n"
+            "    print('held', flush=True)\n"
+            "    time.sleep(600)\n",
+            str(run_dir),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert holder.stdout.readline().strip() == "held"
         with pytest.raises(RunInUseError, match=rf"pid {holder.pid} on "):
@@ -210,14 +238,21 @@ def test_a_run_held_by_another_process_is_refused_and_a_killed_holder_leaves_no_
 def test_a_killed_run_reads_as_killed_not_running(tmp_path: Path) -> None:
     run_dir = RunDirectory(tmp_path / "run")
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time\n"
-         "from torchrl_causal.experiment import RunDirectory\n"
-         "run = RunDirectory(sys.argv[1])\n"
-         "with run.lock():\n"
-         "    run.write_status('running', progress=7)\n"
-         "    print('held', flush=True)\n"
-         "    time.sleep(600)\n", str(run_dir.path)],
-        stdout=subprocess.PIPE, text=True)
+        [
+            sys.executable,
+            "-c",
+            "import sys, time\n"
+            "from torchrl_causal.experiment import RunDirectory\n"
+            "run = RunDirectory(sys.argv[1])\n"
+            "with run.lock():\n"
+            "    run.write_status('running', progress=7)\n"
+            "    print('held', flush=True)\n"
+            "    time.sleep(600)\n",
+            str(run_dir.path),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert holder.stdout.readline().strip() == "held"
         assert run_dir.is_held() and run_dir.read_status() == {"status": "running", "progress": 7}
@@ -297,8 +332,11 @@ def _last_checkpoints(*configs) -> list[dict]:
     return states
 
 
-EXACT = {"sqil": ("algo.total_steps=320", "algo.eval_every=160"), "gail": ("algo.rounds=3", "algo.eval_every=2"),
-         "bc": ("algo.epochs=4", "algo.patience=10")}
+EXACT = {
+    "sqil": ("algo.total_steps=320", "algo.eval_every=160"),
+    "gail": ("algo.rounds=3", "algo.eval_every=2"),
+    "bc": ("algo.epochs=4", "algo.patience=10"),
+}
 
 
 @pytest.mark.parametrize("algo", sorted(EXACT))
@@ -324,8 +362,10 @@ def test_interrupt_at_a_random_step_then_resume_equals_an_uninterrupted_run(tmp_
     curves = [read_scalar_csv(Path(cfg.run_dir) / "logs/scalars/eval/train_return.csv") for cfg in (straight, interrupted)]
     assert curves[0] == curves[1]
     # Every logged scalar too: losses averaged on the device across the interrupt included.
-    logs = [{path.relative_to(Path(cfg.run_dir)): read_scalar_csv(path)
-             for path in (Path(cfg.run_dir) / "logs/scalars").rglob("*.csv")} for cfg in (straight, interrupted)]
+    logs = [
+        {path.relative_to(Path(cfg.run_dir)): read_scalar_csv(path) for path in (Path(cfg.run_dir) / "logs/scalars").rglob("*.csv")}
+        for cfg in (straight, interrupted)
+    ]
     assert logs[0] == logs[1] and len(logs[0]) > 2
     # One attempt per start: the straight run's, and the interrupted run's two.
     attempts = [RunDirectory(cfg.run_dir).read_attempts() for cfg in (straight, interrupted)]
@@ -371,8 +411,7 @@ def test_a_resume_under_other_code_is_logged_and_recorded(tmp_path: Path, monkey
 
 
 def test_replay_buffer_lives_in_the_run_directory_not_in_the_checkpoint(tmp_path: Path) -> None:
-    cfg = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "algo.total_steps=400", "algo.buffer_size=400",
-                      "checkpoint_every_s=0")
+    cfg = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "algo.total_steps=400", "algo.buffer_size=400", "checkpoint_every_s=0")
     with _interrupt_at(get_class(cfg.algo.trainer), 6), pytest.raises(RunInterrupted):
         run(cfg)
     run_dir = RunDirectory(cfg.run_dir)
@@ -395,8 +434,16 @@ def _leaves(state):
 def test_checkpoints_follow_the_clock(tmp_path: Path) -> None:
     counts = {}
     for every in (0, 3600):
-        cfg = tiny_config(tmp_path / str(every), "rovermaze_u", "bc", True, "algo.epochs=4", "algo.patience=10",
-                          "algo.eval_every=4", f"checkpoint_every_s={every}")
+        cfg = tiny_config(
+            tmp_path / str(every),
+            "rovermaze_u",
+            "bc",
+            True,
+            "algo.epochs=4",
+            "algo.patience=10",
+            "algo.eval_every=4",
+            f"checkpoint_every_s={every}",
+        )
         trainer_class = get_class(cfg.algo.trainer)
         original, saves = trainer_class.save_checkpoint, []
         trainer_class.save_checkpoint = lambda self: (saves.append(self.progress), original(self))
@@ -420,8 +467,15 @@ def test_corrupted_checkpoint_is_refused_by_name(tmp_path: Path) -> None:
 def test_route_choice_bc_reproduces_the_appendix_values(tmp_path: Path) -> None:
     """Through the whole trainer: causal BC takes the sheltered route (3/4 in both
     regimes), non-causal BC follows the compass (11/16 at training, 19/48 deployed)."""
-    extra = ("demos.episodes=2000", "algo.epochs=60", "algo.batch_size=256", "algo.patience=60", "algo.eval_every=60",
-             "eval.final_episodes=4000", "eval.num_envs=1000")
+    extra = (
+        "demos.episodes=2000",
+        "algo.epochs=60",
+        "algo.batch_size=256",
+        "algo.patience=60",
+        "algo.eval_every=60",
+        "eval.final_episodes=4000",
+        "eval.num_envs=1000",
+    )
     expected = {True: (3 / 4, 3 / 4), False: (11 / 16, 19 / 48)}
     for causal, (train_value, deploy_value) in expected.items():
         results = run(tiny_config(tmp_path, "route_choice", "bc", causal, *extra))
@@ -437,8 +491,7 @@ def test_evaluate_cli_writes_its_own_record(trained_runs, torch_threads) -> None
     for label in ("c_sqil", "expert"):
         (record,) = [r for r in load_runs(root) if r.label == label]
         final = (record.path / "eval" / "deploy.json").read_bytes()
-        result = evaluate_main([f"run_dir={record.path}", "regime=deploy", "episodes=6", "num_envs=3",
-                                "confounding_strength=0.5"])
+        result = evaluate_main([f"run_dir={record.path}", "regime=deploy", "episodes=6", "num_envs=3", "confounding_strength=0.5"])
         assert result.n_episodes == 6 and result.regime == "deploy"
         assert (record.path / "eval" / "deploy-n6-seed30000-envs3-cs0.5.json").is_file()
         torch.set_num_threads(2)
@@ -458,8 +511,7 @@ def test_successful_only_trains_on_the_successful_episodes_of_the_same_set(tmp_p
 
     # A 198-step horizon truncates some of the rover expert's 188-201-step episodes.
     every = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "env.horizon=198", "demos.episodes=12")
-    successful = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "env.horizon=198", "demos.episodes=12",
-                             "demos.successful_only=true")
+    successful = tiny_config(tmp_path, "rovermaze_u", "sqil", True, "env.horizon=198", "demos.episodes=12", "demos.successful_only=true")
     assert successful.demos.path == every.demos.path  # one set on disk, selected at load
     all_episodes = load_or_collect_demonstrations(every)
     with caplog.at_level("INFO"):

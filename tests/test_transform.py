@@ -85,8 +85,13 @@ class CountingEnv(EnvBase):
 
     def _observe(self) -> TensorDict:
         t, i = self.t, self.index
-        values = {"P": p_value(t, i), "V": v_value(t, i), "W": w_value(t, i), ("latent", "O"): -t.unsqueeze(-1),
-                  ("scm", "U"): 7 * t.unsqueeze(-1)}
+        values = {
+            "P": p_value(t, i),
+            "V": v_value(t, i),
+            "W": w_value(t, i),
+            ("latent", "O"): -t.unsqueeze(-1),
+            ("scm", "U"): 7 * t.unsqueeze(-1),
+        }
         keys = set(self.observation_spec.keys(True, True))
         return TensorDict({key: v for key, v in values.items() if key in keys}, batch_size=self.batch_size)
 
@@ -223,9 +228,7 @@ def test_batch_of_4_with_partial_resets_matches_closed_form(window):
     for i, env_steps in enumerate(episode_steps(lengths, steps)):
         for s, t in enumerate(env_steps):
             torch.testing.assert_close(rollout["observation"][i, s], expected_encoding(window, t, i), rtol=0, atol=0)
-            torch.testing.assert_close(
-                rollout["next", "observation"][i, s], expected_encoding(window, t + 1, i), rtol=0, atol=0
-            )
+            torch.testing.assert_close(rollout["next", "observation"][i, s], expected_encoding(window, t + 1, i), rtol=0, atol=0)
     assert ("W" in rollout.keys()) == ("W" in window.lags)
 
 
@@ -249,9 +252,7 @@ def test_any_batch_shape():
     assert rollout["observation"].shape == (2, 2, 6, 10)
     for i, n in enumerate(lengths.flatten().tolist()):
         for s in range(6):
-            torch.testing.assert_close(
-                rollout["observation"].flatten(0, 1)[i, s], expected_encoding(CAUSAL, s % n, i), rtol=0, atol=0
-            )
+            torch.testing.assert_close(rollout["observation"].flatten(0, 1)[i, s], expected_encoding(CAUSAL, s % n, i), rtol=0, atol=0)
 
 
 # --------------------------------------------------------------------------- offline = online
@@ -264,9 +265,7 @@ def random_window(data) -> AdjustmentWindow:
         "V": data.draw(st.sets(st.integers(0, k)), label="V lags"),
         "X": data.draw(st.sets(st.integers(1, k)) if k else st.just(set()), label="X lags"),
     }
-    return AdjustmentWindow(
-        k=k, action="X", lags={var: tuple(sorted(lags)) for var, lags in lag_sets.items()}, excluded=frozenset({"W"})
-    )
+    return AdjustmentWindow(k=k, action="X", lags={var: tuple(sorted(lags)) for var, lags in lag_sets.items()}, excluded=frozenset({"W"}))
 
 
 @settings(max_examples=25, deadline=None)
@@ -289,9 +288,7 @@ def test_offline_encoding_equals_online_on_random_episodes(data):
     flat = rollout.exclude("observation", ("next", "observation")).reshape(-1)
     offline = CausalWindowTransform(window, chunk_size=data.draw(st.integers(1, 9), label="chunk")).encode_trajectories(flat)
     torch.testing.assert_close(offline["observation"], online["observation"].reshape(flat.numel(), -1), rtol=0, atol=0)
-    torch.testing.assert_close(
-        offline["next", "observation"], online["next", "observation"].reshape(flat.numel(), -1), rtol=0, atol=0
-    )
+    torch.testing.assert_close(offline["next", "observation"], online["next", "observation"].reshape(flat.numel(), -1), rtol=0, atol=0)
     # Batched [B, T] rollouts without is_init: episodes delimited by ("next", "done") and row starts.
     batched = CausalWindowTransform(window).encode_trajectories(rollout.exclude("is_init", "observation"))
     torch.testing.assert_close(batched["observation"], online["observation"], rtol=0, atol=0)
@@ -560,18 +557,20 @@ def test_discrete_specs_give_their_integer_ranges():
 
 
 def test_include_current_false_keeps_only_past_steps():
-    window = AdjustmentWindow(k=2, action="X", lags={"P": (0, 1, 2), "V": (0,), "X": (1, 2)}, exact=True,
-                              observed=("P", "V", "W", "X"))
+    window = AdjustmentWindow(k=2, action="X", lags={"P": (0, 1, 2), "V": (0,), "X": (1, 2)}, exact=True, observed=("P", "V", "W", "X"))
     transform = CausalWindowTransform(window, include_current=False)
     assert transform.window == window.past_only()
     assert transform.window.lags == {"P": (1, 2), "X": (1, 2)}  # V had lag 0 only: gone
     assert not transform.window.exact  # the smaller sets were not checked
     assert window.past_only().past_only() == window.past_only()
     episode = TensorDict(
-        {"P": torch.tensor([[1.0], [2.0], [3.0]]), "W": torch.zeros(3, 1),
-         "action": torch.tensor([[10.0], [20.0], [30.0]]),
-         "is_init": torch.tensor([[True], [False], [False]]),
-         "next": {"P": torch.tensor([[2.0], [3.0], [4.0]]), "W": torch.zeros(3, 1)}},
+        {
+            "P": torch.tensor([[1.0], [2.0], [3.0]]),
+            "W": torch.zeros(3, 1),
+            "action": torch.tensor([[10.0], [20.0], [30.0]]),
+            "is_init": torch.tensor([[True], [False], [False]]),
+            "next": {"P": torch.tensor([[2.0], [3.0], [4.0]]), "W": torch.zeros(3, 1)},
+        },
         batch_size=[3],
     )
     # columns: P_{t-1}, P_{t-2}, X_{t-1}, X_{t-2}
@@ -580,8 +579,15 @@ def test_include_current_false_keeps_only_past_steps():
 
 
 def test_a_window_without_the_action_encodes_no_previous_action_and_hides_dropped_states():
-    window = AdjustmentWindow(k=2, action="X", lags={"P": (0, 1, 2), "V": (0, 1), "X": (1, 2)}, exact=True,
-                              witnesses=(), excluded=frozenset({"W"}), observed=("P", "V", "W", "X"))
+    window = AdjustmentWindow(
+        k=2,
+        action="X",
+        lags={"P": (0, 1, 2), "V": (0, 1), "X": (1, 2)},
+        exact=True,
+        witnesses=(),
+        excluded=frozenset({"W"}),
+        observed=("P", "V", "W", "X"),
+    )
     no_action = window.without(["X"])
     assert no_action.lags == {"P": (0, 1, 2), "V": (0, 1)} and no_action.excluded == {"W"}
     assert not no_action.exact  # the smaller sets were not checked
@@ -591,10 +597,14 @@ def test_a_window_without_the_action_encodes_no_previous_action_and_hides_droppe
     with pytest.raises(ValueError, match=r"cannot drop \['W'\]: not in the window"):
         window.without(["W", "X"])
     episode = TensorDict(
-        {"P": torch.tensor([[1.0], [2.0], [3.0]]), "V": torch.tensor([[5.0], [6.0], [7.0]]), "W": torch.zeros(3, 1),
-         "action": torch.tensor([[10.0], [20.0], [30.0]]),
-         "is_init": torch.tensor([[True], [False], [False]]),
-         "next": {"P": torch.tensor([[2.0], [3.0], [4.0]]), "V": torch.zeros(3, 1), "W": torch.zeros(3, 1)}},
+        {
+            "P": torch.tensor([[1.0], [2.0], [3.0]]),
+            "V": torch.tensor([[5.0], [6.0], [7.0]]),
+            "W": torch.zeros(3, 1),
+            "action": torch.tensor([[10.0], [20.0], [30.0]]),
+            "is_init": torch.tensor([[True], [False], [False]]),
+            "next": {"P": torch.tensor([[2.0], [3.0], [4.0]]), "V": torch.zeros(3, 1), "W": torch.zeros(3, 1)},
+        },
         batch_size=[3],
     )
     # columns: P_t, P_{t-1}, P_{t-2}, V_t, V_{t-1}: the full window's, its action columns cut
@@ -608,15 +618,20 @@ def test_a_window_without_the_action_encodes_no_previous_action_and_hides_droppe
 
 def test_causal_false_conditions_on_every_observed_variable_at_the_window_lags():
     window = AdjustmentWindow(
-        k=2, action="X", lags={"P": (0, 1, 2), "X": (1, 2)}, excluded=frozenset({"W"}), exact=False,
+        k=2,
+        action="X",
+        lags={"P": (0, 1, 2), "X": (1, 2)},
+        excluded=frozenset({"W"}),
+        exact=False,
         observed=("P", "W", "X"),
     )
     twin = CausalWindowTransform(window, causal=False).window
     assert twin == window.non_causal_twin()
     assert twin.lags == {"P": (0, 1, 2), "W": (0, 1, 2), "X": (1, 2)}
     assert twin.excluded == frozenset() and not twin.exact
-    sparse = AdjustmentWindow(k=3, action="X", lags={"P": (0, 3), "X": (2,)}, excluded=frozenset({"W"}), exact=True,
-                              observed=("P", "W", "X"))
+    sparse = AdjustmentWindow(
+        k=3, action="X", lags={"P": (0, 3), "X": (2,)}, excluded=frozenset({"W"}), exact=True, observed=("P", "W", "X")
+    )
     # the union of the state lags for every observed state variable, the action at 1..k
     assert sparse.non_causal_twin().lags == {"P": (0, 3), "W": (0, 3), "X": (1, 2, 3)}
     with pytest.raises(ValueError, match="observed"):
@@ -653,15 +668,17 @@ def test_replay_buffer_encodes_every_sampled_step_from_its_own_episode(sampler):
     torch.manual_seed(0)
     data = raw_transitions()
     # In place, a sample's lags would come from unrelated rows: the plain transform refuses it.
-    naive = ReplayBuffer(storage=LazyTensorStorage(64), sampler=REPLAY_SAMPLERS[sampler](), batch_size=16,
-                         transform=CausalWindowTransform(CAUSAL))
+    naive = ReplayBuffer(
+        storage=LazyTensorStorage(64), sampler=REPLAY_SAMPLERS[sampler](), batch_size=16, transform=CausalWindowTransform(CAUSAL)
+    )
     naive.extend(data)
     with pytest.raises(RuntimeError, match="make_rb_transform_and_sample_unit"):
         naive.sample()
 
     transform, unit = CausalWindowTransform(CAUSAL).make_rb_transform_and_sample_unit()
-    buffer = ReplayBuffer(storage=LazyTensorStorage(64), sampler=REPLAY_SAMPLERS[sampler](), sample_unit=unit,
-                          transform=transform, batch_size=16)
+    buffer = ReplayBuffer(
+        storage=LazyTensorStorage(64), sampler=REPLAY_SAMPLERS[sampler](), sample_unit=unit, transform=transform, batch_size=16
+    )
     buffer.extend(data)
     for _ in range(3):  # 48 stored rows: three batches (a whole epoch without replacement)
         batch, info = buffer.sample(return_info=True)
@@ -673,8 +690,9 @@ def test_replay_buffer_encodes_every_sampled_step_from_its_own_episode(sampler):
 def test_replay_buffer_replaces_steps_whose_history_the_ring_buffer_overwrote():
     data = raw_transitions(lengths=(5,), steps=23)  # t = 0..4 repeated; the last 20 rows stay
     transform, unit = CausalWindowTransform(CAUSAL).make_rb_transform_and_sample_unit()
-    buffer = ReplayBuffer(storage=LazyTensorStorage(20), sampler=SamplerWithoutReplacement(), sample_unit=unit,
-                          transform=transform, batch_size=20)
+    buffer = ReplayBuffer(
+        storage=LazyTensorStorage(20), sampler=SamplerWithoutReplacement(), sample_unit=unit, transform=transform, batch_size=20
+    )
     buffer.extend(data)
     # rows 20-22 wrapped into slots 0-2: slot 2 (t = 2) is the newest, slot 3 (t = 3) the oldest
     assert buffer.storage[2]["P"][0].item() == 3 and buffer.storage[3]["P"][0].item() == 4
@@ -698,8 +716,9 @@ def test_replay_buffer_of_collector_batches_uses_the_trajectory_ids():
     env = TransformedEnv(CountingEnv([5, 5, 5, 5]), InitTracker())
     collector = Collector(env, counting_policy, frames_per_batch=4 * 6, total_frames=4 * 12)
     transform, unit = CausalWindowTransform(CAUSAL).make_rb_transform_and_sample_unit()
-    buffer = ReplayBuffer(storage=LazyTensorStorage(48), sampler=SamplerWithoutReplacement(), sample_unit=unit,
-                          transform=transform, batch_size=48)
+    buffer = ReplayBuffer(
+        storage=LazyTensorStorage(48), sampler=SamplerWithoutReplacement(), sample_unit=unit, transform=transform, batch_size=48
+    )
     for batch in collector:
         buffer.extend(batch.reshape(-1))  # env rows side by side: a row's history is 24 records back
     collector.shutdown()

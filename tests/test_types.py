@@ -36,10 +36,17 @@ def test_every_module_left_unchecked_still_fails() -> None:
     assert modules, "every module is checked: drop this test and the override"
     # The same settings without the override: no config file, its options given here.
     settings = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["mypy"]
-    done = _mypy("--config-file=/dev/null", "--ignore-missing-imports", f"--python-version={settings['python_version']}",
-                 f"--cache-dir={settings['cache_dir']}/without_overrides", *settings["files"])
-    failing = {re.sub(r"\.py$", "", path).replace("/", ".")
-               for path in re.findall(r"^(torchrl_causal/\S+?\.py):\d+: error", done.stdout, flags=re.M)}
+    done = _mypy(
+        "--config-file=/dev/null",
+        "--ignore-missing-imports",
+        f"--python-version={settings['python_version']}",
+        f"--cache-dir={settings['cache_dir']}/without_overrides",
+        *settings["files"],
+    )
+    failing = {
+        re.sub(r"\.py$", "", path).replace("/", ".")
+        for path in re.findall(r"^(torchrl_causal/\S+?\.py):\d+: error", done.stdout, flags=re.M)
+    }
     failing = {module.removesuffix(".__init__") for module in failing}
     clean = [module for module in modules if module not in failing]
     assert not clean, f"now clean, take them off [[tool.mypy.overrides]] in pyproject.toml: {clean}"

@@ -29,8 +29,9 @@ def test_video_decodes_to_the_recorded_steps_from_reset_to_end(tmp_path, fmt: st
     fresh.reset()
     after_reset = _render(fresh)
     env = AntMazeEnv(maze="medium", regime="deploy", batch_size=[1], seed=SEED)
-    video = record_video(env, AntMazeExpert(env), tmp_path / f"episode.{fmt}", max_steps=STEPS, every=EVERY, fps=10,
-                         width=SIZE, height=SIZE, camera="track")
+    video = record_video(
+        env, AntMazeExpert(env), tmp_path / f"episode.{fmt}", max_steps=STEPS, every=EVERY, fps=10, width=SIZE, height=SIZE, camera="track"
+    )
     at_end = _render(env)  # the env is left in the episode's last state
     decoded = iio.imread(video.path, index=None, **({"plugin": "pyav"} if fmt == "mp4" else {})).astype(np.int16)
     assert video.length == STEPS and video.frames == STEPS // EVERY + 1 == decoded.shape[0]
@@ -44,8 +45,7 @@ def test_video_decodes_to_the_recorded_steps_from_reset_to_end(tmp_path, fmt: st
 
 def test_every_keeps_a_frame_per_stride_and_the_last(tmp_path) -> None:
     env = AntMazeEnv(maze="medium", regime="deploy", batch_size=[1], seed=SEED)
-    video = record_video(env, AntMazeExpert(env), tmp_path / "strided.gif", max_steps=10, every=4,
-                         width=16, height=16)
+    video = record_video(env, AntMazeExpert(env), tmp_path / "strided.gif", max_steps=10, every=4, width=16, height=16)
     assert video.frames == 4 == iio.imread(video.path, index=None).shape[0]  # steps 0, 4, 8, 10
 
 

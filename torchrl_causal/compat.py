@@ -56,8 +56,9 @@ def reset_mask(reset_key: NestedKey, tensordict: TensorDictBase) -> torch.Tensor
     return _get_reset(reset_key, tensordict)
 
 
-def reduce_loss(loss_module: LossModule, loss: torch.Tensor, tensordict: TensorDictBase | None = None,
-                *, weights: torch.Tensor | None = None) -> torch.Tensor:
+def reduce_loss(
+    loss_module: LossModule, loss: torch.Tensor, tensordict: TensorDictBase | None = None, *, weights: torch.Tensor | None = None
+) -> torch.Tensor:
     """``loss`` reduced as ``loss_module`` is configured to (its ``reduction``, with the
     sampler's importance ``weights`` when given), as TorchRL's own losses reduce theirs."""
     return loss_module._reduce_loss(loss, tensordict=tensordict, weights=weights)

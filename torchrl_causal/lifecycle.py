@@ -76,8 +76,9 @@ def _first_missing(path: Path) -> Path | None:
 
 
 def _stored_results(run: RunDirectory) -> dict[str, EvaluationResult]:
-    return {regime: EvaluationResult.from_dict(run.read_json(run.eval_path(regime)))
-            for regime in REGIMES if run.eval_path(regime).is_file()}
+    return {
+        regime: EvaluationResult.from_dict(run.read_json(run.eval_path(regime))) for regime in REGIMES if run.eval_path(regime).is_file()
+    }
 
 
 def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
@@ -106,8 +107,7 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
     killed = run_dir.read_status().get("status") == "killed"
     with run_dir.lock():
         if killed and cfg.resume:
-            log.warning("%s: its last attempt was killed before it could record its stop; resuming from its last "
-                        "checkpoint", run_dir.path)
+            log.warning("%s: its last attempt was killed before it could record its stop; resuming from its last checkpoint", run_dir.path)
         if not cfg.resume:
             run_dir.discard()
             created = created or run_dir.path
@@ -119,13 +119,20 @@ def _check_run_root(run_dir: Path) -> None:
     for folder in (run_dir, *run_dir.parents):
         if folder.exists():
             if not folder.is_dir():
-                raise ConfigValueError(f"run_root / run_dir {run_dir} lies below {folder}, which is a file, not a "
-                                       "folder: choose another run_root")
+                raise ConfigValueError(
+                    f"run_root / run_dir {run_dir} lies below {folder}, which is a file, not a folder: choose another run_root"
+                )
             return
 
 
-def _claim_and_run(cfg: DictConfig, run_dir: RunDirectory, trainer_class: type[Trainer] | None,
-                   window: AdjustmentWindow | None, total: int, created: Path | None) -> dict[str, EvaluationResult]:
+def _claim_and_run(
+    cfg: DictConfig,
+    run_dir: RunDirectory,
+    trainer_class: type[Trainer] | None,
+    window: AdjustmentWindow | None,
+    total: int,
+    created: Path | None,
+) -> dict[str, EvaluationResult]:
     extendable = trainer_class is not None and trainer_class.extendable_budget(cfg)
     run_dir.claim(cfg, ignored=(trainer_class.budget_key,) if extendable else ())
     status = run_dir.read_status()
@@ -152,8 +159,9 @@ def _claim_and_run(cfg: DictConfig, run_dir: RunDirectory, trainer_class: type[T
             raise
 
 
-def _train_and_evaluate(cfg: DictConfig, run_dir: RunDirectory, trainer_class: type[Trainer] | None,
-                        window: AdjustmentWindow | None, total: int) -> dict[str, EvaluationResult]:
+def _train_and_evaluate(
+    cfg: DictConfig, run_dir: RunDirectory, trainer_class: type[Trainer] | None, window: AdjustmentWindow | None, total: int
+) -> dict[str, EvaluationResult]:
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.threads)
     device = resolve_device(cfg.device)  # once: the trainer and the evaluator share it
@@ -169,9 +177,16 @@ def _train_and_evaluate(cfg: DictConfig, run_dir: RunDirectory, trainer_class: t
     results = evaluator.final(policy)
     for regime, result in results.items():
         run_dir.write_json(run_dir.eval_path(regime), evaluator.record(result))
-        log.info("%s [%s] success %.1f%% ± %.1f, E[Y] %.1f ± %.1f, episodes %d", cfg.run_dir, regime,
-                 100 * result.success_rate, 100 * result.success_se, result.return_mean, result.return_std,
-                 result.n_episodes)
+        log.info(
+            "%s [%s] success %.1f%% ± %.1f, E[Y] %.1f ± %.1f, episodes %d",
+            cfg.run_dir,
+            regime,
+            100 * result.success_rate,
+            100 * result.success_se,
+            result.return_mean,
+            result.return_std,
+            result.n_episodes,
+        )
     run_dir.update_status("complete", total=total, progress=total if trainer_class is None else trainer.progress)
     if trainer_class is not None:
         trainer.finish()
@@ -192,8 +207,9 @@ def record_settings(episodes: int, seed: int, num_envs: int, confounding_strengt
     return name if confounding_strength is None else f"{name}-cs{confounding_strength:g}"
 
 
-def open_run(run_dir: str | Path, *, confounding_strength: float | None = None,
-             device: str | None = None) -> tuple[RunDirectory, Evaluator, TensorDictModuleBase | None]:
+def open_run(
+    run_dir: str | Path, *, confounding_strength: float | None = None, device: str | None = None
+) -> tuple[RunDirectory, Evaluator, TensorDictModuleBase | None]:
     """The run directory, an :class:`Evaluator` of its config and its selected policy
     (``checkpoints/best.pt``; ``None`` for the expert row, which the evaluator rebuilds
     from each env).
@@ -218,8 +234,7 @@ def open_run(run_dir: str | Path, *, confounding_strength: float | None = None,
     return run, evaluator, evaluator.load_best_policy(run) if window is not None else None
 
 
-def _check_evaluation(regime: str, episodes: int, num_envs: int | None, trajectories: int,
-                      confounding_strength: float | None) -> None:
+def _check_evaluation(regime: str, episodes: int, num_envs: int | None, trajectories: int, confounding_strength: float | None) -> None:
     if regime not in REGIMES:
         raise ValueError(f"regime={regime!r} must be one of {', '.join(REGIMES)}")
     for name, value, least in (("episodes", episodes, 1), ("num_envs", num_envs, 1), ("trajectories", trajectories, 0)):
@@ -229,9 +244,19 @@ def _check_evaluation(regime: str, episodes: int, num_envs: int | None, trajecto
         raise ValueError(f"confounding_strength={confounding_strength} is out of range: it must lie in [0, 1]")
 
 
-def evaluate_run(run_dir: str | Path, regime: str = "deploy", episodes: int = 1000, *, num_envs: int | None = None,
-                 seed: int = 30_000, confounding_strength: float | None = None, trajectories: int = 0,
-                 save: bool = True, reuse: bool = False, device: str | None = None) -> EvaluationResult:
+def evaluate_run(
+    run_dir: str | Path,
+    regime: str = "deploy",
+    episodes: int = 1000,
+    *,
+    num_envs: int | None = None,
+    seed: int = 30_000,
+    confounding_strength: float | None = None,
+    trajectories: int = 0,
+    save: bool = True,
+    reuse: bool = False,
+    device: str | None = None,
+) -> EvaluationResult:
     """Evaluates the selected policy of ``run_dir`` (see the module docstring); with
     ``reuse=True`` a stored record of the same settings is returned instead.
 
@@ -247,8 +272,7 @@ def evaluate_run(run_dir: str | Path, regime: str = "deploy", episodes: int = 10
     if reuse and record.is_file():
         return EvaluationResult.from_dict(stored.read_json(record))
     run, evaluator, policy = open_run(run_dir, confounding_strength=confounding_strength, device=device)
-    result = evaluator.evaluate(policy, regime, int(episodes), int(seed), trajectories=int(trajectories),
-                                num_envs=num_envs)
+    result = evaluator.evaluate(policy, regime, int(episodes), int(seed), trajectories=int(trajectories), num_envs=num_envs)
     if save:
         run.write_json(record, evaluator.record(result))
     return result

@@ -37,8 +37,7 @@ log = logging.getLogger(__name__)
 class Progress:
     """Counts ``total`` units; reports as log lines (see the module docstring)."""
 
-    def __init__(self, total: int, desc: str, unit: str, *, initial: int = 0, interval_s: float = 30.0,
-                 leave: bool = True) -> None:
+    def __init__(self, total: int, desc: str, unit: str, *, initial: int = 0, interval_s: float = 30.0, leave: bool = True) -> None:
         self.total, self.desc, self.unit, self.n = total, desc, unit, initial
         self.interval_s, self.leave = interval_s, leave
         self.postfix = ""
@@ -57,8 +56,7 @@ class Progress:
         self._last = time.monotonic()
         self._reported = self.n
         share = f" ({100 * self.n / self.total:.0f}%)" if self.total else ""
-        log.info("%s: %d/%d %s%s%s", self.desc, self.n, self.total, self.unit, share,
-                 f" [{self.postfix}]" if self.postfix else "")
+        log.info("%s: %d/%d %s%s%s", self.desc, self.n, self.total, self.unit, share, f" [{self.postfix}]" if self.postfix else "")
 
     def close(self) -> None:
         """Logs the final count, unless ``leave=False`` and the loop was too short for a line."""
@@ -77,8 +75,9 @@ class _Silent(Progress):
         pass
 
 
-def progress(total: int, desc: str, unit: str, *, enabled: bool = True, initial: int = 0,
-             interval_s: float = 30.0, leave: bool = True) -> Progress | tqdm:
+def progress(
+    total: int, desc: str, unit: str, *, enabled: bool = True, initial: int = 0, interval_s: float = 30.0, leave: bool = True
+) -> Progress | tqdm:
     """A progress reporter with tqdm's ``update`` / ``set_postfix`` / ``close`` interface.
 
     Args:

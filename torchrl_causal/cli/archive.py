@@ -23,8 +23,11 @@ from torchrl_causal.evaluation.runs import archive_runs
 
 __all__ = ["OPTIONS", "main"]
 
-OPTIONS: dict[str, Option] = {"runs": Option(str, placeholder="<dir>"), "out": Option(str, placeholder="<dir>"),
-                              "policies": Option(bool, False)}
+OPTIONS: dict[str, Option] = {
+    "runs": Option(str, placeholder="<dir>"),
+    "out": Option(str, placeholder="<dir>"),
+    "policies": Option(bool, False),
+}
 
 
 def main(argv: Sequence[str] | None = None) -> list[Path]:

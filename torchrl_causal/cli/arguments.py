@@ -181,4 +181,3 @@ def one_line_errors(*user_errors: type[BaseException]) -> Iterator[None]:
 def argv_or_sys(argv: Sequence[str] | None) -> list[str]:
     """``argv``, or the process's own arguments when it is ``None``."""
     return list(sys.argv[1:] if argv is None else argv)
-

@@ -38,30 +38,49 @@ from torchrl_causal.lifecycle import run
 __all__ = ["main", "demo_overrides", "DEMO_SETTINGS", "DEMO_ALGOS", "DEMO_RUNS"]
 
 DEMO_SETTINGS: list[str] = [
-    "scale=cpu", "threads=1", "env=rovermaze_u", "env.horizon=400", "window.k=2", "demos.episodes=200",
-    "eval.episodes=20", "eval.final_episodes=200", "eval.num_envs=200",
+    "scale=cpu",
+    "threads=1",
+    "env=rovermaze_u",
+    "env.horizon=400",
+    "window.k=2",
+    "demos.episodes=200",
+    "eval.episodes=20",
+    "eval.final_episodes=200",
+    "eval.num_envs=200",
 ]
 DEMO_ALGOS: dict[str, list[str]] = {
     "expert": [],
     # 32 envs at the paper's UTD 0.25 (more exploration data per update than UTD 1 with
     # 8 envs, which had not reached the goal after 8k updates), lr 1e-3 constant and
     # absorbing states: measured to reach the goal within ~5k updates.
-    "sqil": ["algo.total_steps=36096", "algo.random_steps=1280", "algo.utd_ratio=0.25", "algo.num_envs=32",
-             "algo.frames_per_batch=256", "algo.eval_every=4096", "algo.loss.absorbing=true",
-             "algo.critic_scheduler=null", "algo.actor_optimizer.lr=1e-3", "algo.critic_optimizer.lr=1e-3"],
+    "sqil": [
+        "algo.total_steps=36096",
+        "algo.random_steps=1280",
+        "algo.utd_ratio=0.25",
+        "algo.num_envs=32",
+        "algo.frames_per_batch=256",
+        "algo.eval_every=4096",
+        "algo.loss.absorbing=true",
+        "algo.critic_scheduler=null",
+        "algo.actor_optimizer.lr=1e-3",
+        "algo.critic_optimizer.lr=1e-3",
+    ],
     "bc": ["algo.epochs=30", "algo.eval_every=10"],
 }
 # (algorithm, causal): the expert first (its demonstrations feed the rest), then the
 # paper's method and its twin, then behaviour cloning.
 DEMO_RUNS: tuple[tuple[str, bool], ...] = (
-    ("expert", False), ("sqil", True), ("sqil", False), ("bc", True), ("bc", False),
+    ("expert", False),
+    ("sqil", True),
+    ("sqil", False),
+    ("bc", True),
+    ("bc", False),
 )
 
 
 def demo_overrides(algo: str, causal: bool, run_root: str | Path) -> list[str]:
     """The Hydra overrides of one demo run."""
-    return [*DEMO_SETTINGS, f"algo={algo}", *DEMO_ALGOS[algo], f"causal={str(causal).lower()}",
-            f"run_root={run_root}"]
+    return [*DEMO_SETTINGS, f"algo={algo}", *DEMO_ALGOS[algo], f"causal={str(causal).lower()}", f"run_root={run_root}"]
 
 
 def _run_one(overrides: list[str]) -> int:
@@ -95,8 +114,7 @@ def _stop(exit_codes: list[int | None]) -> None:
     if any(code > 128 for code in codes):
         print("Interrupted: what was done is saved. Resume with: make demo", file=sys.stderr)
     else:
-        print(f"A run failed (exit status {max(codes)}; its error is above). Fix it, then resume with: make demo",
-              file=sys.stderr)
+        print(f"A run failed (exit status {max(codes)}; its error is above). Fix it, then resume with: make demo", file=sys.stderr)
     raise SystemExit(max(codes))
 
 

@@ -59,9 +59,11 @@ def main(argv: Sequence[str] | None = None) -> EvaluationResult:
     with one_line_errors(CheckpointError):
         result = evaluate_run(**args)
     s = result.summary()
-    print(f"{args['run_dir']} [{s['regime']}] episodes {s['n_episodes']}: success {100 * s['success_rate']:.1f}% "
-          f"± {100 * s['success_se']:.1f}, E[Y] {s['return_mean']:.1f} ± {s['return_std']:.1f}, "
-          f"successful episode length {_pm(s['ep_len_mean'], s['ep_len_std'], 0)}")
+    print(
+        f"{args['run_dir']} [{s['regime']}] episodes {s['n_episodes']}: success {100 * s['success_rate']:.1f}% "
+        f"± {100 * s['success_se']:.1f}, E[Y] {s['return_mean']:.1f} ± {s['return_std']:.1f}, "
+        f"successful episode length {_pm(s['ep_len_mean'], s['ep_len_std'], 0)}"
+    )
     return result
 
 

@@ -50,20 +50,35 @@ def _episode_of_run(run_dir: str | Path, regime: str, seed: int) -> Iterator[tup
         env.close()
 
 
-def filmstrip_of_run(run_dir: str | Path, *, regime: str = "deploy", seed: int = 0, frames: int = 6,
-                     every: int = 10, size: int = 240, camera: str | None = None) -> Filmstrip:
+def filmstrip_of_run(
+    run_dir: str | Path,
+    *,
+    regime: str = "deploy",
+    seed: int = 0,
+    frames: int = 6,
+    every: int = 10,
+    size: int = 240,
+    camera: str | None = None,
+) -> Filmstrip:
     """One ``regime`` episode of the selected policy of ``run_dir`` (see the module docstring)."""
     with _episode_of_run(run_dir, regime, seed) as (env, acting, horizon):
-        return record_filmstrip(env, acting, max_steps=horizon, frames=frames, every=every, width=size, height=size,
-                                camera=camera)
+        return record_filmstrip(env, acting, max_steps=horizon, frames=frames, every=every, width=size, height=size, camera=camera)
 
 
-def video_of_run(run_dir: str | Path, path: str | Path, *, regime: str = "deploy", seed: int = 0, every: int = 1,
-                 fps: int = 30, size: int = 240, camera: str | None = None) -> RecordedVideo:
+def video_of_run(
+    run_dir: str | Path,
+    path: str | Path,
+    *,
+    regime: str = "deploy",
+    seed: int = 0,
+    every: int = 1,
+    fps: int = 30,
+    size: int = 240,
+    camera: str | None = None,
+) -> RecordedVideo:
     """The same episode as :func:`filmstrip_of_run`, as a video at ``path`` (``.mp4`` / ``.gif``)."""
     with _episode_of_run(run_dir, regime, seed) as (env, acting, horizon):
-        return record_video(env, acting, path, max_steps=horizon, every=every, fps=fps, width=size, height=size,
-                            camera=camera)
+        return record_video(env, acting, path, max_steps=horizon, every=every, fps=fps, width=size, height=size, camera=camera)
 
 
 def _file_name(label: str) -> str:
@@ -91,10 +106,11 @@ def _main(argv: Sequence[str] | None) -> Path:
     args = OmegaConf.from_cli(list(sys.argv[1:] if argv is None else argv))
     unknown = set(args) - _ARGS
     if unknown or "runs" not in args or "out" not in args:
-        raise SystemExit("usage: python -m torchrl_causal.filmstrip runs=[<dir>,...] out=<png, or a folder for videos> "
-                         "[labels=[...]] [format=png|mp4|gif] [regime=deploy] [seed=0] [frames=6] [every=10 (png), "
-                         "1 (videos)] [fps=30] [size=240] [camera=<name>]"
-                         + (f"; unknown argument(s) {sorted(unknown)}" if unknown else ""))
+        raise SystemExit(
+            "usage: python -m torchrl_causal.filmstrip runs=[<dir>,...] out=<png, or a folder for videos> "
+            "[labels=[...]] [format=png|mp4|gif] [regime=deploy] [seed=0] [frames=6] [every=10 (png), "
+            "1 (videos)] [fps=30] [size=240] [camera=<name>]" + (f"; unknown argument(s) {sorted(unknown)}" if unknown else "")
+        )
     runs = [str(run) for run in args.runs]
     labels = [str(label) for label in args.get("labels", runs)]
     if len(labels) != len(runs):
@@ -104,16 +120,22 @@ def _main(argv: Sequence[str] | None) -> Path:
         raise SystemExit(f"format={fmt} is not one of png, {', '.join(VIDEO_FORMATS)}")
     episode = {key: args[key] for key in ("regime", "seed", "every", "size", "camera") if key in args}
     if fmt == "png":
-        strips = _record_all(runs, labels, lambda label, run: filmstrip_of_run(
-            run, **episode, **({"frames": args.frames} if "frames" in args else {})))
+        strips = _record_all(
+            runs, labels, lambda label, run: filmstrip_of_run(run, **episode, **({"frames": args.frames} if "frames" in args else {}))
+        )
         path = save_filmstrips(strips, args.out)
         print(f"wrote {path}")
         return path
     folder = Path(args.out)
     if len({_file_name(label) for label in labels}) != len(labels):
         raise SystemExit(f"labels {labels} do not give one file name each")
-    _record_all(runs, labels, lambda label, run: video_of_run(
-        run, folder / f"{_file_name(label)}.{fmt}", **episode, **({"fps": args.fps} if "fps" in args else {})))
+    _record_all(
+        runs,
+        labels,
+        lambda label, run: video_of_run(
+            run, folder / f"{_file_name(label)}.{fmt}", **episode, **({"fps": args.fps} if "fps" in args else {})
+        ),
+    )
     print(f"wrote {len(runs)} {fmt} file(s) to {folder}")
     return folder
 

@@ -39,8 +39,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parse_arguments("report", argv_or_sys(argv), OPTIONS)
     targets = EffectTargets(**{key: args.pop(key) for key in TARGET_KEYS})
     with one_line_errors():
-        report = write_report(args["runs"], args["out"], name=args["name"], command=args["command"],
-                              carried=args["carried"], targets=targets)
+        report = write_report(
+            args["runs"], args["out"], name=args["name"], command=args["command"], carried=args["carried"], targets=targets
+        )
     print(report.markdown.read_text())
     print(f"wrote {report.markdown}, {report.csv}, {report.all_csv}" + "".join(f", {p}" for p in report.figures))
 

@@ -96,10 +96,21 @@ def run_statuses(root: str | Path) -> list[dict[str, str]]:
         best = status.get("best_train_return")
         # a run training again after its budget was raised still holds the earlier budget's evaluations
         final = [_success(run, regime) if state == "complete" else "—" for regime in ("train", "deploy")]
-        rows.append(dict(zip(COLUMNS, (
-            str(run.path.relative_to(root)) or ".", state, _progress(status), _attempts(run),
-            "—" if best is None else f"{best:.1f}", *final,
-        ))))
+        rows.append(
+            dict(
+                zip(
+                    COLUMNS,
+                    (
+                        str(run.path.relative_to(root)) or ".",
+                        state,
+                        _progress(status),
+                        _attempts(run),
+                        "—" if best is None else f"{best:.1f}",
+                        *final,
+                    ),
+                )
+            )
+        )
     return rows
 
 

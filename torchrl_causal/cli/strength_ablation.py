@@ -43,8 +43,9 @@ __all__ = ["OPTIONS", "PAPER_STRENGTHS", "strength_ablation", "strength_markdown
 PAPER_STRENGTHS: tuple[float, ...] = (0.15, 0.5, 0.85, 1.0)  # Appendix F's strength ablation
 OPTIONS: dict[str, Option] = {
     "runs": Option(str, placeholder="<dir>"),
-    "strengths": Option(list, list(PAPER_STRENGTHS), ge=0.0, le=1.0, item=float,
-                        placeholder="[" + ",".join(map(str, PAPER_STRENGTHS)) + "]"),
+    "strengths": Option(
+        list, list(PAPER_STRENGTHS), ge=0.0, le=1.0, item=float, placeholder="[" + ",".join(map(str, PAPER_STRENGTHS)) + "]"
+    ),
     "episodes": Option(int, 1000, ge=1),
     "seed": Option(int, 30_000, ge=0),
     "out": Option(str, None, placeholder="<runs>/report"),
@@ -54,8 +55,9 @@ OPTIONS: dict[str, Option] = {
 log = logging.getLogger(__name__)
 
 
-def strength_ablation(runs_root: str | Path, strengths: Sequence[float] = PAPER_STRENGTHS, episodes: int = 1000,
-                      seed: int = 30_000) -> list[RunRecord]:
+def strength_ablation(
+    runs_root: str | Path, strengths: Sequence[float] = PAPER_STRENGTHS, episodes: int = 1000, seed: int = 30_000
+) -> list[RunRecord]:
     """One record per run and strength, its setting's ``strength`` set to the evaluated one
     and its only evaluation the deploy regime there (ready for
     :func:`~torchrl_causal.evaluation.tables.aggregate`).
@@ -70,25 +72,33 @@ def strength_ablation(runs_root: str | Path, strengths: Sequence[float] = PAPER_
         raise FileNotFoundError(f"no evaluated runs below {runs_root} (expected */config.yaml with eval/*.json)")
     settings = {run.setting._replace(strength=0.0) for run in runs}
     if len(settings) > 1:
-        raise ValueError(f"runs below {runs_root} differ in more than the strength: {sorted(settings)}; "
-                         "point runs= at one setting's folder")
+        raise ValueError(
+            f"runs below {runs_root} differ in more than the strength: {sorted(settings)}; point runs= at one setting's folder"
+        )
     bad = [s for s in strengths if not 0.0 <= float(s) <= 1.0]
     if bad:
         raise ValueError(f"strengths must lie in [0, 1], got {bad}")
     records = []
     for run in runs:
         try:
-            evaluations = {float(strength): evaluate_run(run.path, "deploy", int(episodes), seed=int(seed),
-                                                         confounding_strength=float(strength), reuse=True)
-                           for strength in strengths}
+            evaluations = {
+                float(strength): evaluate_run(
+                    run.path, "deploy", int(episodes), seed=int(seed), confounding_strength=float(strength), reuse=True
+                )
+                for strength in strengths
+            }
         except CheckpointError as error:
             log.warning("left out: %s, and it holds no record of every strength asked for", error)
             continue
-        records += [replace(run, setting=run.setting._replace(strength=strength), evaluations={"deploy": result})
-                    for strength, result in evaluations.items()]
+        records += [
+            replace(run, setting=run.setting._replace(strength=strength), evaluations={"deploy": result})
+            for strength, result in evaluations.items()
+        ]
     if not records:
-        raise FileNotFoundError(f"no run below {runs_root} could be evaluated at strengths {list(strengths)}: "
-                                "their selected policies are gone and they hold no such records")
+        raise FileNotFoundError(
+            f"no run below {runs_root} could be evaluated at strengths {list(strengths)}: "
+            "their selected policies are gone and they hold no such records"
+        )
     return records
 
 
@@ -99,8 +109,7 @@ def strength_markdown(records: Sequence[RunRecord]) -> str:
     settings = sorted(aggregated, key=lambda s: s.strength)
     labels = ordered_labels({label for table in aggregated.values() for label in table})
     seeds = {label: sorted({r.seed for r in records if r.label == label}) for label in labels}
-    lines = ["| Algorithm | Seeds | " + " | ".join(f"{s.strength:g}" for s in settings) + " |",
-             "|---|---|" + "---|" * len(settings)]
+    lines = ["| Algorithm | Seeds | " + " | ".join(f"{s.strength:g}" for s in settings) + " |", "|---|---|" + "---|" * len(settings)]
     for label in labels:
         cells = [", ".join(map(str, seeds[label]))]
         for setting in settings:
@@ -124,18 +133,31 @@ def main(argv: Sequence[str] | None = None) -> Path:
     command = " ".join(["python -m torchrl_causal.strength_ablation", *cli])
     setting = records[0].setting
     trained = list({record.path: record for record in records}.values())
-    text = "\n".join([
-        f"# Confounding-strength ablation: {setting.env} (H={setting.horizon}, k={setting.k})", "",
-        "Regenerate with:", "", "```bash", command, "```", "",
-        notes, "",
-        f"Deploy-regime success rate (%) ± SE of each run's selected policy, {args['episodes']} episodes per strength "
-        f"(evaluation seed {args['seed']}), pooled over the training seeds of each row. "
-        "Strength s rotates the compass by s·π at deployment; training is unchanged.", "",
-        strength_markdown(records), "",
-        "What made these runs (package versions, CPU and threads of their training attempts):", "",
-        provenance_markdown(trained), "",
-        *([f"![strength ablation]({figure.name})", ""] if figure is not None else []),
-    ])
+    text = "\n".join(
+        [
+            f"# Confounding-strength ablation: {setting.env} (H={setting.horizon}, k={setting.k})",
+            "",
+            "Regenerate with:",
+            "",
+            "```bash",
+            command,
+            "```",
+            "",
+            notes,
+            "",
+            f"Deploy-regime success rate (%) ± SE of each run's selected policy, {args['episodes']} episodes per strength "
+            f"(evaluation seed {args['seed']}), pooled over the training seeds of each row. "
+            "Strength s rotates the compass by s·π at deployment; training is unchanged.",
+            "",
+            strength_markdown(records),
+            "",
+            "What made these runs (package versions, CPU and threads of their training attempts):",
+            "",
+            provenance_markdown(trained),
+            "",
+            *([f"![strength ablation]({figure.name})", ""] if figure is not None else []),
+        ]
+    )
     path.write_text(text)
     print(text)
     return path

@@ -51,8 +51,7 @@ def entry_point() -> None:
         main()
     except KeyboardInterrupt:
         command = " ".join(["python -m torchrl_causal.train", *sys.argv[1:]])
-        print(f"interrupted by SIGINT before the run started, nothing was written. Resume with: {command}",
-              file=sys.stderr)
+        print(f"interrupted by SIGINT before the run started, nothing was written. Resume with: {command}", file=sys.stderr)
         raise SystemExit(130) from None
 
 

@@ -11,5 +11,13 @@ from torchrl_causal.data.demonstrations import (
 )
 from torchrl_causal.data.minari_format import export_minari, load_minari_demonstrations
 
-__all__ = ["FORMAT_VERSION", "DatasetError", "collect_demonstrations", "export_minari", "load_demonstrations",
-           "load_minari_demonstrations", "read_metadata", "successful_episodes"]
+__all__ = [
+    "FORMAT_VERSION",
+    "DatasetError",
+    "collect_demonstrations",
+    "export_minari",
+    "load_demonstrations",
+    "load_minari_demonstrations",
+    "read_metadata",
+    "successful_episodes",
+]

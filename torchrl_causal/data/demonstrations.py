@@ -243,9 +243,7 @@ def _check_file_sizes(path: Path, manifest: Mapping[str, Mapping[str, Any]]) -> 
         dtype = getattr(torch, entry["dtype"].removeprefix("torch."))
         expected = math.prod(entry["shape"]) * dtype.itemsize
         if file.stat().st_size != expected:
-            raise DatasetError(
-                f"dataset {path} key {name!r} is truncated or padded: {file.stat().st_size} bytes, expected {expected}"
-            )
+            raise DatasetError(f"dataset {path} key {name!r} is truncated or padded: {file.stat().st_size} bytes, expected {expected}")
 
 
 def check_manifest(data: TensorDictBase, manifest: Mapping[str, Mapping[str, Any]], path: str | os.PathLike) -> None:

@@ -50,8 +50,15 @@ from torchrl_causal.data.demonstrations import (
 )
 from torchrl_causal.extras import require_extra
 
-__all__ = ["METADATA_KEY", "export_minari", "from_minari_replay", "load_minari_demonstrations",
-           "minari_dataset_dir", "read_minari_metadata", "replay_layout"]
+__all__ = [
+    "METADATA_KEY",
+    "export_minari",
+    "from_minari_replay",
+    "load_minari_demonstrations",
+    "minari_dataset_dir",
+    "read_minari_metadata",
+    "replay_layout",
+]
 
 METADATA_KEY = "torchrl_causal"
 # Keys of our layout that are not observations: Minari has a field for each, or they are
@@ -102,13 +109,11 @@ def _numpy(value: torch.Tensor) -> np.ndarray:
 def _dict_space(data: TensorDictBase) -> Any:
     import gymnasium as gym
 
-    return gym.spaces.Dict({key: _dict_space(value) if isinstance(value, TensorDictBase) else _space(value)
-                            for key, value in data.items()})
+    return gym.spaces.Dict({key: _dict_space(value) if isinstance(value, TensorDictBase) else _space(value) for key, value in data.items()})
 
 
 def _nested_numpy(data: TensorDictBase) -> dict[str, Any]:
-    return {key: _nested_numpy(value) if isinstance(value, TensorDictBase) else _numpy(value)
-            for key, value in data.items()}
+    return {key: _nested_numpy(value) if isinstance(value, TensorDictBase) else _numpy(value) for key, value in data.items()}
 
 
 def _observations(data: TensorDictBase) -> TensorDictBase:
@@ -121,8 +126,10 @@ def _check_chained(observations: TensorDictBase, next_observations: TensorDictBa
     for key in observations.keys(include_nested=True, leaves_only=True):
         if not torch.equal(next_observations.get(key)[:-1], observations.get(key)[1:]):
             name = ".".join(key) if isinstance(key, tuple) else key
-            raise DatasetError(f"episode {episode}: ('next', {name!r}) differs from the next step's {name!r}; "
-                               "Minari's one-observation-per-step layout cannot store it")
+            raise DatasetError(
+                f"episode {episode}: ('next', {name!r}) differs from the next step's {name!r}; "
+                "Minari's one-observation-per-step layout cannot store it"
+            )
 
 
 def _episode_buffers(data: TensorDictBase) -> Iterator[Any]:
@@ -231,8 +238,10 @@ def minari_dataset_dir(source: str | os.PathLike) -> Path:
     for candidate in (Path(source), _default_root() / str(source)):
         if (candidate / "data" / "metadata.json").is_file():
             return candidate
-    raise DatasetError(f"no Minari dataset {str(source)!r}: neither a folder holding data/metadata.json nor an id "
-                       f"under {_default_root()} (set MINARI_DATASETS_PATH or give the path)")
+    raise DatasetError(
+        f"no Minari dataset {str(source)!r}: neither a folder holding data/metadata.json nor an id "
+        f"under {_default_root()} (set MINARI_DATASETS_PATH or give the path)"
+    )
 
 
 def read_minari_metadata(source: str | os.PathLike) -> dict[str, Any]:
@@ -247,8 +256,10 @@ def read_minari_metadata(source: str | os.PathLike) -> dict[str, Any]:
 def _ours(metadata: Mapping[str, Any], where: Path) -> dict[str, Any]:
     ours = metadata.get(METADATA_KEY)
     if not isinstance(ours, Mapping) or "env" not in ours or "manifest" not in ours:
-        raise DatasetError(f"Minari dataset {where} has no {METADATA_KEY!r} metadata with the env config and manifest: "
-                           "export it with torchrl_causal.data.export_minari, or add that entry to its metadata")
+        raise DatasetError(
+            f"Minari dataset {where} has no {METADATA_KEY!r} metadata with the env config and manifest: "
+            "export it with torchrl_causal.data.export_minari, or add that entry to its metadata"
+        )
     return dict(ours)
 
 
@@ -274,14 +285,23 @@ def replay_layout(episodes: Iterable[Any]) -> TensorDict:
         length = len(episode)
         terminated = torch.as_tensor(episode.terminations).reshape(length, 1).bool()
         truncated = torch.as_tensor(episode.truncations).reshape(length, 1).bool()
-        steps.append(TensorDict({
-            "observation": _tensors(episode.observations, slice(0, length)),
-            "action": _tensors(episode.actions, slice(0, length)),
-            "episode": torch.full((length,), int(episode.id), dtype=torch.int64),
-            "next": {"observation": _tensors(episode.observations, slice(1, length + 1)),
-                     "reward": torch.as_tensor(episode.rewards).reshape(length, 1),
-                     "terminated": terminated, "truncated": truncated, "done": terminated | truncated},
-        }, batch_size=[length]))
+        steps.append(
+            TensorDict(
+                {
+                    "observation": _tensors(episode.observations, slice(0, length)),
+                    "action": _tensors(episode.actions, slice(0, length)),
+                    "episode": torch.full((length,), int(episode.id), dtype=torch.int64),
+                    "next": {
+                        "observation": _tensors(episode.observations, slice(1, length + 1)),
+                        "reward": torch.as_tensor(episode.rewards).reshape(length, 1),
+                        "terminated": terminated,
+                        "truncated": truncated,
+                        "done": terminated | truncated,
+                    },
+                },
+                batch_size=[length],
+            )
+        )
     if not steps:
         raise DatasetError("the Minari dataset holds no episode")
     return torch.cat(steps, 0)
@@ -358,8 +378,7 @@ def load_minari_demonstrations(
         data = from_minari_replay(replay_layout(dataset.iterate_episodes()), ours)
     except (OSError, RuntimeError, KeyError, ValueError, TypeError, AssertionError) as error:
         first_line = str(error).splitlines()[0] if str(error) else type(error).__name__
-        raise DatasetError(f"Minari dataset {directory} cannot be read (corrupted or truncated?): "
-                           f"{first_line}") from error
+        raise DatasetError(f"Minari dataset {directory} cannot be read (corrupted or truncated?): {first_line}") from error
     check_manifest(data, ours["manifest"], directory)
     if verify_checksum and "checksum" in ours and dataset_checksum(data, ours) != ours["checksum"]:
         raise DatasetError(f"Minari dataset {directory} fails its checksum: its data or metadata were modified")

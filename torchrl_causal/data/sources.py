@@ -34,10 +34,11 @@ def minari_reference(source: str | None) -> str | None:
     """
     if source is None:
         return None
-    if not source.startswith(MINARI_PREFIX) or not source[len(MINARI_PREFIX):]:
-        raise DatasetError(f"demos.source={source!r} is not a source: use null (our format at demos.path) or "
-                           f"{MINARI_PREFIX}<dataset id or path>")
-    return source[len(MINARI_PREFIX):]
+    if not source.startswith(MINARI_PREFIX) or not source[len(MINARI_PREFIX) :]:
+        raise DatasetError(
+            f"demos.source={source!r} is not a source: use null (our format at demos.path) or {MINARI_PREFIX}<dataset id or path>"
+        )
+    return source[len(MINARI_PREFIX) :]
 
 
 def source_problem(source: str | None) -> str | None:
@@ -52,8 +53,9 @@ def source_problem(source: str | None) -> str | None:
     return missing_extra(f"demos.source={source}", "minari", "h5py")
 
 
-def load_source(source: str | None, path: str | os.PathLike, expected: Mapping[str, Any] | EnvBase | None = None,
-                *, verify_checksum: bool = True) -> TensorDictBase:
+def load_source(
+    source: str | None, path: str | os.PathLike, expected: Mapping[str, Any] | EnvBase | None = None, *, verify_checksum: bool = True
+) -> TensorDictBase:
     """The demonstrations of ``source`` (our format at ``path`` when ``source`` is ``None``),
     refused unless they match ``expected`` (see :func:`~torchrl_causal.data.load_demonstrations`)."""
     reference = minari_reference(source)

@@ -104,8 +104,9 @@ def load_locomotion_network(path: str | pathlib.Path = LOCOMOTION_WEIGHTS) -> nn
         FileNotFoundError: naming the command that regenerates the weights.
         RuntimeError: when the file is not a state dict of :func:`make_locomotion_network`.
     """
-    return load_skill_network(path, make_locomotion_network(),
-                              regenerate="python -m torchrl_causal.envs.locomotion --skill ant (about 2.5 CPU-hours)")
+    return load_skill_network(
+        path, make_locomotion_network(), regenerate="python -m torchrl_causal.envs.locomotion --skill ant (about 2.5 CPU-hours)"
+    )
 
 
 def locomotion_observation(qpos_tail: torch.Tensor, qvel: torch.Tensor, direction: torch.Tensor) -> torch.Tensor:
@@ -153,9 +154,14 @@ class AntLocomotionEnv(DirectionalLocomotionEnv):
         count = self.batch_count(batch_size)
         spec = mujoco.MjSpec.from_file(str(ANT_XML))
         ogbench_ant_physics(spec)
-        super().__init__(BatchedSimulation(spec.compile(), num_envs=count, frame_skip=OGBENCH_FRAME_SKIP),
-                         observation_dim=LOCOMOTION_OBSERVATION_DIM, horizon=horizon,
-                         direction_period=direction_period, gust_process=gust_process, seed=seed)
+        super().__init__(
+            BatchedSimulation(spec.compile(), num_envs=count, frame_skip=OGBENCH_FRAME_SKIP),
+            observation_dim=LOCOMOTION_OBSERVATION_DIM,
+            horizon=horizon,
+            direction_period=direction_period,
+            gust_process=gust_process,
+            seed=seed,
+        )
 
     def _start_state(self, count: int) -> tuple[np.ndarray, np.ndarray]:
         model = self.simulation.model

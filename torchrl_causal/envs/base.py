@@ -108,15 +108,11 @@ class GustProcess:
         """Draws fresh gusts of shape ``shape + (2,)`` (zero where calm)."""
         uniforms = torch.rand((*shape, 3), generator=generator, device=device, dtype=dtype)
         active, magnitude, angle = uniforms.unbind(-1)
-        magnitude = torch.where(
-            active < self.probability, self.low + (self.high - self.low) * magnitude, torch.zeros_like(magnitude)
-        )
+        magnitude = torch.where(active < self.probability, self.low + (self.high - self.low) * magnitude, torch.zeros_like(magnitude))
         angle = 2 * math.pi * angle
         return torch.stack((magnitude * torch.cos(angle), magnitude * torch.sin(angle)), dim=-1)
 
-    def advance(
-        self, gust: torch.Tensor, step_count: torch.Tensor, *, generator: torch.Generator | None = None
-    ) -> torch.Tensor:
+    def advance(self, gust: torch.Tensor, step_count: torch.Tensor, *, generator: torch.Generator | None = None) -> torch.Tensor:
         """The gust at step ``step_count`` given the gust of the previous step.
 
         Args:
@@ -362,9 +358,7 @@ class ConfoundedEnv(EnvBase):
         self.action_spec = action_spec
         self.reward_spec = Unbounded(shape=(*self.batch_size, 1), device=self.device)
         flag = Binary(n=1, shape=(*self.batch_size, 1), device=self.device, dtype=torch.bool)
-        self.done_spec = Composite(
-            done=flag, terminated=flag.clone(), truncated=flag.clone(), shape=self.batch_size, device=self.device
-        )
+        self.done_spec = Composite(done=flag, terminated=flag.clone(), truncated=flag.clone(), shape=self.batch_size, device=self.device)
 
     def _set_seed(self, seed: int | None) -> None:
         self.rng.manual_seed(int(seed) if seed is not None else int(torch.randint(0, 2**62, ()).item()))
@@ -380,8 +374,7 @@ class ConfoundedEnv(EnvBase):
         self._reset_state(mask)
         false = torch.zeros_like(self._success)
         return TensorDict(
-            {**self._observation(), "success": self._success.clone(), "done": false, "terminated": false,
-             "truncated": false.clone()},
+            {**self._observation(), "success": self._success.clone(), "done": false, "terminated": false, "truncated": false.clone()},
             batch_size=self.batch_size,
             device=self.device,
         )
@@ -394,8 +387,14 @@ class ConfoundedEnv(EnvBase):
         terminated = self._terminated(success)
         truncated = (self._step_count >= self.horizon) & ~terminated
         return TensorDict(
-            {**self._observation(), "reward": reward, "success": success, "done": terminated | truncated,
-             "terminated": terminated, "truncated": truncated},
+            {
+                **self._observation(),
+                "reward": reward,
+                "success": success,
+                "done": terminated | truncated,
+                "terminated": terminated,
+                "truncated": truncated,
+            },
             batch_size=self.batch_size,
             device=self.device,
         )

@@ -90,9 +90,7 @@ class RoverExpert(TensorDictModuleBase):
         self.min_throttle = min_throttle
         self.turn_gain = turn_gain
         self.noise = _ActionNoise(noise_std, seed, env.device)
-        self.planner = MazePlanner(
-            env.layout, env.goal_cell, lookahead=lookahead, clearance=env.params.half_size + margin
-        )
+        self.planner = MazePlanner(env.layout, env.goal_cell, lookahead=lookahead, clearance=env.params.half_size + margin)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         position = tensordict.get("P")
@@ -116,8 +114,17 @@ class _PlannedSkillExpert(TensorDictModuleBase):
     variables and how the skill reads them (:meth:`_skill_observation`).
     """
 
-    def __init__(self, env: MujocoMazeEnv, skill: torch.nn.Module, *, action_dim: int, lookahead: int,
-                 clearance: float, noise_std: float, seed: int | None) -> None:
+    def __init__(
+        self,
+        env: MujocoMazeEnv,
+        skill: torch.nn.Module,
+        *,
+        action_dim: int,
+        lookahead: int,
+        clearance: float,
+        noise_std: float,
+        seed: int | None,
+    ) -> None:
         super().__init__()
         self.planner = MazePlanner(env.layout, env.task.goal_cell, lookahead=lookahead, clearance=clearance)
         self.locomotion = skill.to(env.device)
@@ -179,8 +186,9 @@ class AntMazeExpert(_PlannedSkillExpert):
     ) -> None:
         if not isinstance(env, AntMazeEnv):
             raise TypeError(f"AntMazeExpert drives an AntMazeEnv, got {type(env).__name__}")
-        super().__init__(env, load_locomotion_network(weights), action_dim=8, lookahead=lookahead,
-                         clearance=clearance, noise_std=noise_std, seed=seed)
+        super().__init__(
+            env, load_locomotion_network(weights), action_dim=8, lookahead=lookahead, clearance=clearance, noise_std=noise_std, seed=seed
+        )
 
     def _skill_observation(self, tensordict: TensorDictBase, direction: torch.Tensor) -> torch.Tensor:
         position = tensordict.get("P")
@@ -220,8 +228,15 @@ class HumanoidMazeExpert(_PlannedSkillExpert):
     ) -> None:
         if not isinstance(env, HumanoidMazeEnv):
             raise TypeError(f"HumanoidMazeExpert drives a HumanoidMazeEnv, got {type(env).__name__}")
-        super().__init__(env, load_humanoid_locomotion_network(weights), action_dim=21, lookahead=lookahead,
-                         clearance=clearance, noise_std=noise_std, seed=seed)
+        super().__init__(
+            env,
+            load_humanoid_locomotion_network(weights),
+            action_dim=21,
+            lookahead=lookahead,
+            clearance=clearance,
+            noise_std=noise_std,
+            seed=seed,
+        )
 
     def _skill_observation(self, tensordict: TensorDictBase, direction: torch.Tensor) -> torch.Tensor:
         return torch.cat([tensordict.get(key) for key in self.in_keys[1:]] + [direction], dim=-1)

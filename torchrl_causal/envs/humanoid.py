@@ -145,7 +145,6 @@ def standing_qpos(model: mujoco.MjModel, yaw: np.ndarray, *, clearance: float = 
     return qpos
 
 
-
 #: The skill's variables, in OGBench's skill-observation order (its ``online-humanoid`` ``_get_obs``):
 #: everything the maze expert reads except the position P, so the skill is translation-invariant.
 HUMANOID_SKILL_VARIABLES = ("A", "H", "E", "V", "C", "J")
@@ -161,9 +160,16 @@ def load_humanoid_locomotion_network(path: str | pathlib.Path = HUMANOID_LOCOMOT
     Raises:
         FileNotFoundError: naming the command that makes the weights.
     """
-    return load_skill_network(path, make_skill_network(HUMANOID_SKILL_OBSERVATION_DIM, 21), regenerate=(
-        "python -m torchrl_causal.envs.locomotion --skill humanoid (~7-10 CPU-hours over several sittings; "
-        "results/humanoid_locomotion/README.md)"))
+    return load_skill_network(
+        path,
+        make_skill_network(HUMANOID_SKILL_OBSERVATION_DIM, 21),
+        regenerate=(
+            "python -m torchrl_causal.envs.locomotion --skill humanoid (~7-10 CPU-hours over several sittings; "
+            "results/humanoid_locomotion/README.md)"
+        ),
+    )
+
+
 _SKILL_COLUMNS = np.concatenate([np.arange(HUMANOID_STATE_WIDTH)[HUMANOID_COLUMNS[v]] for v in HUMANOID_SKILL_VARIABLES])
 
 
@@ -217,9 +223,14 @@ class HumanoidLocomotionEnv(DirectionalLocomotionEnv):
         model = mujoco.MjModel.from_xml_path(str(HUMANOID_XML))
         self._readout = HumanoidReadout(model)
         self._variables = np.zeros((count, HUMANOID_STATE_WIDTH))
-        super().__init__(BatchedSimulation(model, num_envs=count, frame_skip=HUMANOID_FRAME_SKIP),
-                         observation_dim=HUMANOID_SKILL_OBSERVATION_DIM, horizon=horizon,
-                         direction_period=direction_period, gust_process=gust_process, seed=seed)
+        super().__init__(
+            BatchedSimulation(model, num_envs=count, frame_skip=HUMANOID_FRAME_SKIP),
+            observation_dim=HUMANOID_SKILL_OBSERVATION_DIM,
+            horizon=horizon,
+            direction_period=direction_period,
+            gust_process=gust_process,
+            seed=seed,
+        )
 
     def _start_state(self, count: int) -> tuple[np.ndarray, np.ndarray]:
         model = self.simulation.model

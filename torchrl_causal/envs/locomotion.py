@@ -60,16 +60,22 @@ from torchrl_causal.envs.humanoid import (
 from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv, make_skill_network
 from torchrl_causal.experiment.run_directory import atomic_save, load_checkpoint
 
-__all__ = ["SKILLS", "SKILL_WEIGHTS", "LocomotionConfig", "LocomotionSkill", "evaluate_locomotion", "make_locomotion_actor",
-           "train_locomotion"]
+__all__ = [
+    "SKILLS",
+    "SKILL_WEIGHTS",
+    "LocomotionConfig",
+    "LocomotionSkill",
+    "evaluate_locomotion",
+    "make_locomotion_actor",
+    "train_locomotion",
+]
 
 _CHECKPOINT = "checkpoint.pt"
 _RESUME_STATE = "resume_state.pt"
 _BUFFER = "buffer"
 _CONFIG = "locomotion_config.json"
 #: what SACLoss reads; the collector's other entries (loc, scale, xy...) stay out of the buffer.
-_TRANSITION_KEYS = ("observation", "action", ("next", "observation"), ("next", "reward"), ("next", "done"),
-                    ("next", "terminated"))
+_TRANSITION_KEYS = ("observation", "action", ("next", "observation"), ("next", "reward"), ("next", "done"), ("next", "terminated"))
 
 
 @dataclass(frozen=True)
@@ -99,8 +105,17 @@ class LocomotionConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("total_steps", "buffer_size", "num_envs", "frames_per_batch", "batch_size", "hidden", "eval_every",
-                     "eval_envs", "eval_steps"):
+        for name in (
+            "total_steps",
+            "buffer_size",
+            "num_envs",
+            "frames_per_batch",
+            "batch_size",
+            "hidden",
+            "eval_every",
+            "eval_envs",
+            "eval_steps",
+        ):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.frames_per_batch % self.num_envs:
@@ -139,13 +154,24 @@ class LocomotionSkill:
 
 #: The skills: OGBench's ant (its SAC budget) and OGBench's humanoid (issue 38's budget).
 SKILLS: dict[str, LocomotionSkill] = {
-    "ant": LocomotionSkill("ant", lambda n, seed: AntLocomotionEnv(batch_size=n, seed=seed),
-                           LOCOMOTION_OBSERVATION_DIM, 8, LOCOMOTION_WEIGHTS),
+    "ant": LocomotionSkill(
+        "ant", lambda n, seed: AntLocomotionEnv(batch_size=n, seed=seed), LOCOMOTION_OBSERVATION_DIM, 8, LOCOMOTION_WEIGHTS
+    ),
     "humanoid": LocomotionSkill(
-        "humanoid", lambda n, seed: HumanoidLocomotionEnv(batch_size=n, seed=seed), HUMANOID_SKILL_OBSERVATION_DIM,
-        21, HUMANOID_LOCOMOTION_WEIGHTS,
-        defaults={"total_steps": 3_000_000, "buffer_size": 1_000_000, "updates_per_step": 0.5, "num_envs": 8,
-                  "eval_every": 50_000, "eval_steps": 400}),
+        "humanoid",
+        lambda n, seed: HumanoidLocomotionEnv(batch_size=n, seed=seed),
+        HUMANOID_SKILL_OBSERVATION_DIM,
+        21,
+        HUMANOID_LOCOMOTION_WEIGHTS,
+        defaults={
+            "total_steps": 3_000_000,
+            "buffer_size": 1_000_000,
+            "updates_per_step": 0.5,
+            "num_envs": 8,
+            "eval_every": 50_000,
+            "eval_steps": 400,
+        },
+    ),
 }
 
 
@@ -162,22 +188,29 @@ def make_locomotion_actor(body: nn.Module | None = None) -> ProbabilisticActor:
         torch.Size([2, 8])
     """
     body = SKILLS["ant"].network() if body is None else body
-    module = TensorDictModule(nn.Sequential(body, NormalParamExtractor()), in_keys=["observation"],
-                              out_keys=["loc", "scale"])
-    return ProbabilisticActor(module, in_keys=["loc", "scale"], out_keys=["action"], distribution_class=TanhNormal,
-                              distribution_kwargs={"low": -1.0, "high": 1.0}, return_log_prob=False)
+    module = TensorDictModule(nn.Sequential(body, NormalParamExtractor()), in_keys=["observation"], out_keys=["loc", "scale"])
+    return ProbabilisticActor(
+        module,
+        in_keys=["loc", "scale"],
+        out_keys=["action"],
+        distribution_class=TanhNormal,
+        distribution_kwargs={"low": -1.0, "high": 1.0},
+        return_log_prob=False,
+    )
 
 
 def _make_critic(skill: LocomotionSkill, hidden: int) -> ValueOperator:
     # TorchRL's MLP concatenates its (observation, action) inputs.
-    network = MLP(in_features=skill.observation_dim + skill.action_dim, out_features=1, num_cells=[hidden, hidden],
-                  activation_class=nn.ReLU)
+    network = MLP(
+        in_features=skill.observation_dim + skill.action_dim, out_features=1, num_cells=[hidden, hidden], activation_class=nn.ReLU
+    )
     return ValueOperator(network, in_keys=["observation", "action"])
 
 
 @torch.no_grad()
-def evaluate_locomotion(body: nn.Module, *, skill: str | LocomotionSkill = "ant", envs: int = 8, steps: int = 300,
-                        seed: int = 12345) -> dict[str, float]:
+def evaluate_locomotion(
+    body: nn.Module, *, skill: str | LocomotionSkill = "ant", envs: int = 8, steps: int = 300, seed: int = 12345
+) -> dict[str, float]:
     """Deterministic rollouts of ``body`` on open ground, in the gusts.
 
     Returns ``speed``, the mean ground-plane speed (m/s) along the command over every step;
@@ -193,8 +226,11 @@ def evaluate_locomotion(body: nn.Module, *, skill: str | LocomotionSkill = "ant"
         rollout = env.rollout(steps, actor, break_when_any_done=False)
     fell = rollout["next", "terminated"][..., 0]
     first_fall = torch.where(fell.any(-1), fell.float().argmax(-1) + 1, torch.full_like(fell[:, 0], steps, dtype=torch.long))
-    return {"speed": rollout["next", "speed"].mean().item(), "fall_rate": fell.any(-1).float().mean().item(),
-            "steps_to_fall": first_fall.float().mean().item()}
+    return {
+        "speed": rollout["next", "speed"].mean().item(),
+        "fall_rate": fell.any(-1).float().mean().item(),
+        "steps_to_fall": first_fall.float().mean().item(),
+    }
 
 
 class _Progress:
@@ -226,20 +262,23 @@ _BOOKKEEPING = frozenset({"total_steps", "eval_every", "eval_envs", "eval_steps"
 def _check_same_config(saved: dict[str, Any], config: LocomotionConfig, where: str | Path) -> None:
     """Refuses to continue a run made with another config (its learning settings, not its bookkeeping)."""
     defaults = asdict(LocomotionConfig())  # fields added since the run started keep their default
-    changed = sorted(k for k, v in asdict(config).items()
-                     if k not in _BOOKKEEPING and saved.get(k, defaults[k]) != v)
+    changed = sorted(k for k, v in asdict(config).items() if k not in _BOOKKEEPING and saved.get(k, defaults[k]) != v)
     if changed:
-        raise ValueError(f"{where} was trained with another config (changed: {changed}); "
-                         "use a new --run-dir or the same settings")
+        raise ValueError(f"{where} was trained with another config (changed: {changed}); use a new --run-dir or the same settings")
 
 
 #: ``train_locomotion``'s default ``output``: the weights the package ships for the skill.
 SKILL_WEIGHTS = Path("<the skill's shipped weights>")
 
 
-def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionConfig(), *,
-                     skill: str | LocomotionSkill = "ant", output: str | Path | None = SKILL_WEIGHTS,
-                     resume_from: str | Path | None = None) -> dict[str, Any]:
+def train_locomotion(
+    run_dir: str | Path,
+    config: LocomotionConfig = LocomotionConfig(),
+    *,
+    skill: str | LocomotionSkill = "ant",
+    output: str | Path | None = SKILL_WEIGHTS,
+    resume_from: str | Path | None = None,
+) -> dict[str, Any]:
     """Trains (or resumes) a skill's policy in ``run_dir``; exports the best body to ``output``.
 
     ``output`` defaults to the weights shipped for the skill (``skill.weights``); ``None``
@@ -260,8 +299,9 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
     torch.manual_seed(config.seed)
 
     actor = make_locomotion_actor(skill.network(config.hidden))
-    loss = SACLoss(actor, _make_critic(skill, config.hidden), num_qvalue_nets=2, loss_function="l2",
-                   action_spec=skill.make_env(1, 0).action_spec[0])
+    loss = SACLoss(
+        actor, _make_critic(skill, config.hidden), num_qvalue_nets=2, loss_function="l2", action_spec=skill.make_env(1, 0).action_spec[0]
+    )
     loss.make_value_estimator(gamma=config.gamma)
     target_updater = SoftUpdate(loss, tau=config.tau)
     optimizers = {
@@ -293,8 +333,11 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
         load_learner(state)
         if "best_body" in state:  # the best policy so far travels with the state
             atomic_save(state["best_body"], run_dir / "best_body.pt")
-        print(f"[{skill.name}] resumed at {counters['steps']} steps from {resume_from}; the buffer refills "
-              f"from the current policy ({config.random_steps} steps)", flush=True)
+        print(
+            f"[{skill.name}] resumed at {counters['steps']} steps from {resume_from}; the buffer refills "
+            f"from the current policy ({config.random_steps} steps)",
+            flush=True,
+        )
     config_path.write_text(json.dumps(asdict(config), indent=2))
 
     def save() -> None:
@@ -307,8 +350,14 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
             (run_dir / _BUFFER).rename(old)
         tmp.rename(run_dir / _BUFFER)
         shutil.rmtree(old, ignore_errors=True)
-        learner = {"progress": counters["steps"], "skill": skill.name, "config": asdict(config), "loss": loss.state_dict(),
-                   "optimizers": {k: o.state_dict() for k, o in optimizers.items()}, "counters": dict(counters)}
+        learner = {
+            "progress": counters["steps"],
+            "skill": skill.name,
+            "config": asdict(config),
+            "loss": loss.state_dict(),
+            "optimizers": {k: o.state_dict() for k, o in optimizers.items()},
+            "counters": dict(counters),
+        }
         atomic_save({**learner, "torch_rng": torch.get_rng_state()}, checkpoint)
         best = run_dir / "best_body.pt"
         best_body = {"best_body": torch.load(best, weights_only=True)} if best.exists() else {}
@@ -322,10 +371,15 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
         counters["collect_seed"] += 1
         env = skill.make_env(config.num_envs, counters["collect_seed"])
         random_left = max(0, config.random_steps - counters["steps"])
-        collector = Collector(env, actor, frames_per_batch=config.frames_per_batch,
-                              total_frames=math.ceil(remaining / config.frames_per_batch) * config.frames_per_batch,
-                              init_random_frames=math.ceil(random_left / config.frames_per_batch) * config.frames_per_batch,
-                              device="cpu", auto_register_policy_transforms=False)
+        collector = Collector(
+            env,
+            actor,
+            frames_per_batch=config.frames_per_batch,
+            total_frames=math.ceil(remaining / config.frames_per_batch) * config.frames_per_batch,
+            init_random_frames=math.ceil(random_left / config.frames_per_batch) * config.frames_per_batch,
+            device="cpu",
+            auto_register_policy_transforms=False,
+        )
         last_save = time.monotonic()
         for batch in collector:
             buffer.extend(batch.reshape(-1).select(*_TRANSITION_KEYS))
@@ -346,8 +400,7 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
                     counters["updates"] += 1
                     counters["update_debt"] -= 1
                 if losses is not None:
-                    metrics.update(loss_qvalue=losses["loss_qvalue"].item(), alpha=losses["alpha"].item(),
-                                   entropy=losses["entropy"].item())
+                    metrics.update(loss_qvalue=losses["loss_qvalue"].item(), alpha=losses["alpha"].item(), entropy=losses["entropy"].item())
             collector.update_policy_weights_()
             steps = counters["steps"]
             if steps % config.eval_every < config.frames_per_batch or steps >= config.total_steps:
@@ -364,14 +417,12 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
                 last_save = time.monotonic()
             for name, value in metrics.items():
                 logger.log_scalar(name, value, step=steps)
-            progress.update(steps, **{k: v for k, v in metrics.items()
-                                      if k in ("train_reward", "eval_speed", "eval_fall_rate", "alpha")})
+            progress.update(steps, **{k: v for k, v in metrics.items() if k in ("train_reward", "eval_speed", "eval_fall_rate", "alpha")})
             if steps >= config.total_steps:
                 break
         collector.shutdown()
         save()
-    record = {"skill": skill.name, "steps": counters["steps"], "updates": counters["updates"],
-              "best_eval_speed": counters["best_speed"]}
+    record = {"skill": skill.name, "steps": counters["steps"], "updates": counters["updates"], "best_eval_speed": counters["best_speed"]}
     if output is not None and (run_dir / "best_body.pt").exists():
         output = Path(output)
         output.parent.mkdir(parents=True, exist_ok=True)
@@ -382,29 +433,36 @@ def train_locomotion(run_dir: str | Path, config: LocomotionConfig = LocomotionC
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--skill", choices=sorted(SKILLS), default="ant")
-    parser.add_argument("--run-dir", default=None, help="checkpoints, buffer and logs (resumed); "
-                        "default runs/<skill>_locomotion")
-    parser.add_argument("--resume-from", default=None,
-                        help="a resume_state.pt to start an empty --run-dir from (the buffer refills from the policy)")
+    parser.add_argument("--run-dir", default=None, help="checkpoints, buffer and logs (resumed); default runs/<skill>_locomotion")
+    parser.add_argument(
+        "--resume-from", default=None, help="a resume_state.pt to start an empty --run-dir from (the buffer refills from the policy)"
+    )
     parser.add_argument("--steps", type=int, default=None, help="total env steps (skill default: ant 400k, humanoid 3M)")
     parser.add_argument("--utd", type=float, default=None, help="gradient steps per env step (ant 1, humanoid 0.5)")
-    parser.add_argument("--random-steps", type=int, default=None,
-                        help="uniformly random steps of a fresh run; the buffer size at which updates start")
+    parser.add_argument(
+        "--random-steps", type=int, default=None, help="uniformly random steps of a fresh run; the buffer size at which updates start"
+    )
     parser.add_argument("--eval-every", type=int, default=None, help="env steps between evaluations (and checkpoints)")
     parser.add_argument("--seed", type=int, default=None)
-    parser.add_argument("--output", default=None, help="where the best policy body is exported "
-                        "(default: the skill's weights in the package)")
+    parser.add_argument(
+        "--output", default=None, help="where the best policy body is exported (default: the skill's weights in the package)"
+    )
     parser.add_argument("--threads", type=int, default=1, help="torch threads (one is fastest on small CPUs)")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     skill = SKILLS[args.skill]
-    config = skill.config(total_steps=args.steps, updates_per_step=args.utd, random_steps=args.random_steps,
-                          eval_every=args.eval_every, seed=args.seed)
-    record = train_locomotion(args.run_dir or f"runs/{skill.name}_locomotion", config, skill=skill,
-                              output=args.output or SKILL_WEIGHTS, resume_from=args.resume_from)
+    config = skill.config(
+        total_steps=args.steps, updates_per_step=args.utd, random_steps=args.random_steps, eval_every=args.eval_every, seed=args.seed
+    )
+    record = train_locomotion(
+        args.run_dir or f"runs/{skill.name}_locomotion",
+        config,
+        skill=skill,
+        output=args.output or SKILL_WEIGHTS,
+        resume_from=args.resume_from,
+    )
     print(json.dumps(record))
 
 

@@ -446,8 +446,7 @@ class MujocoMazeEnv(GustConfoundedEnv):
     def _make_variable_specs(self) -> tuple[TensorSpec, Mapping[NestedKey, TensorSpec]]:
         batch = tuple(self.batch_size)
         shape = (*batch, self._action_low.numel())
-        action = Bounded(self._action_low.expand(shape), self._action_high.expand(shape), shape=shape,
-                         device=self.device)
+        action = Bounded(self._action_low.expand(shape), self._action_high.expand(shape), shape=shape, device=self.device)
         variables: dict[NestedKey, TensorSpec] = {}
         for name, columns in self.variable_columns.items():
             key = ("latent", name) if name in self.latent_variables else name
@@ -497,8 +496,11 @@ class MujocoMazeEnv(GustConfoundedEnv):
     def get_extra_state(self) -> dict[str, Any]:
         """:meth:`ConfoundedEnv.get_extra_state` plus every simulation's physics state and
         the variable buffer read from it."""
-        return {**super().get_extra_state(), "physics": torch.from_numpy(self.simulator.get_state()),
-                "variables": torch.from_numpy(self._state.copy())}
+        return {
+            **super().get_extra_state(),
+            "physics": torch.from_numpy(self.simulator.get_state()),
+            "variables": torch.from_numpy(self._state.copy()),
+        }
 
     def set_extra_state(self, state: Mapping[str, Any]) -> None:
         super().set_extra_state(state)
@@ -527,8 +529,7 @@ class MujocoMazeEnv(GustConfoundedEnv):
         ``"back"`` for the humanoid); the default looks straight down on the whole maze.
         """
         view = self.simulator.overview_camera() if camera is None else self.simulator.camera(camera)
-        frames = [self.simulator.render(i, width=width, height=height, camera=view)
-                  for i in range(self.simulator.num_envs)]
+        frames = [self.simulator.render(i, width=width, height=height, camera=view) for i in range(self.simulator.num_envs)]
         return np.stack(frames).reshape(*self.batch_size, height, width, 3)
 
     def close(self, *, raise_if_closed: bool = True) -> None:
@@ -538,4 +539,3 @@ class MujocoMazeEnv(GustConfoundedEnv):
 
 def _width(columns: slice) -> int:
     return columns.stop - columns.start
-

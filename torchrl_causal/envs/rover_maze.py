@@ -191,11 +191,16 @@ class RoverMazeEnv(GustConfoundedEnv):
 
         period = self.gust_process.period
         directed = (
-            ("O", "O", 1), ("X", "O", 1),  # heading = previous heading + turn
-            ("L", "L", 1), ("X", "L", 1),  # speed responds to throttle
-            ("P", "P", 1), ("O", "P", 0), ("L", "P", 0),  # P_t = P_{t-1} + L_t O_t + push U_{t-1}
+            ("O", "O", 1),
+            ("X", "O", 1),  # heading = previous heading + turn
+            ("L", "L", 1),
+            ("X", "L", 1),  # speed responds to throttle
+            ("P", "P", 1),
+            ("O", "P", 0),
+            ("L", "P", 0),  # P_t = P_{t-1} + L_t O_t + push U_{t-1}
             ("O", "W", 0),  # compass reads the heading (read_compass in _observation)
-            ("P", "X", 0), ("O", "X", 0),  # the expert (RoverExpert) steers from P and O
+            ("P", "X", 0),
+            ("O", "X", 0),  # the expert (RoverExpert) steers from P and O
         )
         # W_t depends on U_t, P_t on U_{t-1}: nodes depending on U_a and U_b may share a gust iff |a - b| < period.
         bidirected = (

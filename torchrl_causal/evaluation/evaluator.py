@@ -68,8 +68,9 @@ class Evaluator:
             resolved it, resolved when a policy is loaded if not given.
     """
 
-    def __init__(self, cfg: DictConfig, window: AdjustmentWindow | None, *, progress: bool = False,
-                 device: torch.device | None = None) -> None:
+    def __init__(
+        self, cfg: DictConfig, window: AdjustmentWindow | None, *, progress: bool = False, device: torch.device | None = None
+    ) -> None:
         self.cfg = cfg
         self.window = window
         self.progress = progress
@@ -85,8 +86,9 @@ class Evaluator:
         """``policy``, or for ``None`` the env's expert built on ``env`` (it reads that env's latent state)."""
         return make_expert(self.cfg, env) if policy is None else policy
 
-    def evaluate(self, policy: Policy | None, regime: str, episodes: int, seed: int, *, trajectories: int = 0,
-                 num_envs: int | None = None) -> EvaluationResult:
+    def evaluate(
+        self, policy: Policy | None, regime: str, episodes: int, seed: int, *, trajectories: int = 0, num_envs: int | None = None
+    ) -> EvaluationResult:
         """Runs ``policy`` in eval mode (no dropout, deterministic actions) for ``episodes``
         episodes in batches of ``num_envs`` (default ``cfg.eval.num_envs``).
 
@@ -101,8 +103,15 @@ class Evaluator:
             acting.eval()
         try:
             return evaluate_policy(
-                env, for_cpu_env(acting), episodes=episodes, max_steps=self.cfg.env.horizon, regime=regime, seeds=[self.cfg.seed],
-                position_key=self.cfg.env.position_key, trajectories=trajectories, progress=self.progress,
+                env,
+                for_cpu_env(acting),
+                episodes=episodes,
+                max_steps=self.cfg.env.horizon,
+                regime=regime,
+                seeds=[self.cfg.seed],
+                position_key=self.cfg.env.position_key,
+                trajectories=trajectories,
+                progress=self.progress,
             )
         finally:
             if was_training is not None:
@@ -117,10 +126,16 @@ class Evaluator:
     def final(self, policy: Policy | None) -> dict[str, EvaluationResult]:
         """Both regimes on ``cfg.eval.final_episodes`` episodes, ``cfg.eval.trajectories``
         deploy-regime positions kept for the figure."""
-        return {regime: self.evaluate(policy, regime, self.cfg.eval.final_episodes,
-                                      FINAL_EVAL_SEED + 1000 * offset + self.cfg.seed,
-                                      trajectories=self.cfg.eval.trajectories)
-                for offset, regime in enumerate(REGIMES)}
+        return {
+            regime: self.evaluate(
+                policy,
+                regime,
+                self.cfg.eval.final_episodes,
+                FINAL_EVAL_SEED + 1000 * offset + self.cfg.seed,
+                trajectories=self.cfg.eval.trajectories,
+            )
+            for offset, regime in enumerate(REGIMES)
+        }
 
     def record(self, result: EvaluationResult) -> dict[str, Any]:
         """The JSON record of ``result`` (with the maze geometry)."""
@@ -135,8 +150,10 @@ class Evaluator:
         device = resolve_device(self.cfg.device) if self.device is None else self.device
         state = run.load_checkpoint(best=True, map_location=device)
         if state is None:
-            raise CheckpointError(f"run {run.path} has no checkpoints/best.pt to evaluate (an archived run keeps its "
-                                  "records only): evaluate the original run directory, or train the run again")
+            raise CheckpointError(
+                f"run {run.path} has no checkpoints/best.pt to evaluate (an archived run keeps its "
+                "records only): evaluate the original run directory, or train the run again"
+            )
         env = self.make_env("train", 1, 0)
         try:
             policy = make_policy(self.cfg, env).to(device)

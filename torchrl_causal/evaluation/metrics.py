@@ -129,8 +129,7 @@ class EvaluationResult:
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
-        data["trajectories"] = [[[round(float(x), TRAJECTORY_DECIMALS) for x in point] for point in path]
-                                for path in self.trajectories]
+        data["trajectories"] = [[[round(float(x), TRAJECTORY_DECIMALS) for x in point] for point in path] for path in self.trajectories]
         data["summary"] = self.summary()
         return data
 

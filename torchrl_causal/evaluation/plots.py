@@ -39,8 +39,7 @@ def plot_training_curves(runs: Sequence[RunRecord], path: str | Path) -> Path | 
     by_label: dict[str, list[RunRecord]] = defaultdict(list)
     for run in runs:
         by_label[run.label].append(run)
-    families = [f for f in _FAMILIES if any(by_label.get(p) and any(r.curve for r in by_label[p])
-                                            for p in (f, f"c_{f}"))]
+    families = [f for f in _FAMILIES if any(by_label.get(p) and any(r.curve for r in by_label[p]) for p in (f, f"c_{f}"))]
     if not families:
         return None
     fig, axes = plt.subplots(1, len(families), figsize=(4.2 * len(families), 3.4), squeeze=False)
@@ -54,8 +53,7 @@ def plot_training_curves(runs: Sequence[RunRecord], path: str | Path) -> Path | 
             deploy = [r.evaluations["deploy"] for r in by_label[label] if "deploy" in r.evaluations]
             if deploy:
                 value = EvaluationResult.pool(deploy).return_mean
-                ax.scatter([steps[-1]], [value], color=colour, marker="X", s=80, zorder=3,
-                           label=f"{display_name(label)} (deploy, final)")
+                ax.scatter([steps[-1]], [value], color=colour, marker="X", s=80, zorder=3, label=f"{display_name(label)} (deploy, final)")
         ax.set_title(display_name(family))
         units = {r.unit for label in (family, f"c_{family}") for r in by_label.get(label, ()) if r.unit}
         ax.set_xlabel(f"training progress ({' / '.join(sorted(units)) or 'steps'})")
@@ -79,20 +77,22 @@ def _draw_maze(ax, maze: Mapping | None) -> None:
         ax.scatter(*maze["start"][:2], marker="o", s=60, color="tab:green", edgecolor="k", zorder=4)
 
 
-def plot_trajectories(table_runs: Mapping[str, Sequence[RunRecord]], path: str | Path,
-                      regime: str = "deploy") -> Path | None:
+def plot_trajectories(table_runs: Mapping[str, Sequence[RunRecord]], path: str | Path, regime: str = "deploy") -> Path | None:
     """Recorded ``regime`` trajectories of each algorithm drawn on the maze (Figure 3 style).
 
     Green paths reached the goal, red ones did not. Returns ``None`` when no run recorded a
     trajectory (e.g. Route Choice, which has no positions).
     """
-    labels = [label for label in ordered_labels(table_runs)
-              if any(r.evaluations.get(regime) and r.evaluations[regime].trajectories for r in table_runs[label])]
+    labels = [
+        label
+        for label in ordered_labels(table_runs)
+        if any(r.evaluations.get(regime) and r.evaluations[regime].trajectories for r in table_runs[label])
+    ]
     if not labels:
         return None
     rows, cols = _grid(len(labels))
     fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.6 * rows), squeeze=False)
-    for ax in axes.flat[len(labels):]:
+    for ax in axes.flat[len(labels) :]:
         ax.axis("off")
     for ax, label in zip(axes.flat, labels):
         runs = [r for r in table_runs[label] if regime in r.evaluations]
@@ -137,14 +137,19 @@ def plot_ablation(
     fig, ax = plt.subplots(figsize=(6, 4))
     labels = ordered_labels({label for s in settings for label in aggregated[s]})
     for label in labels:
-        points = [(getattr(s, axis), aggregated[s][label][regime]) for s in settings
-                  if regime in aggregated[s].get(label, {})]
+        points = [(getattr(s, axis), aggregated[s][label][regime]) for s in settings if regime in aggregated[s].get(label, {})]
         if not points:
             continue
         xs = [x for x, _ in points]
-        ax.errorbar(xs, [100 * r.success_rate for _, r in points], yerr=[100 * r.success_se for _, r in points],
-                    marker="o", capsize=3, label=display_name(label),
-                    linestyle="-" if label.startswith("c_") or label == "expert" else "--")
+        ax.errorbar(
+            xs,
+            [100 * r.success_rate for _, r in points],
+            yerr=[100 * r.success_se for _, r in points],
+            marker="o",
+            capsize=3,
+            label=display_name(label),
+            linestyle="-" if label.startswith("c_") or label == "expert" else "--",
+        )
     ax.set_xlabel(ABLATION_AXES[axis])
     ax.set_ylabel(f"{regime} success rate (%)")
     ax.set_title(f"{settings[0].env}: {ABLATION_AXES[axis]} ablation")

@@ -19,8 +19,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp  
 
 from torchrl_causal.evaluation.metrics import Policy  # noqa: E402
 
-__all__ = ["EpisodeOutcome", "Filmstrip", "RenderingUnavailable", "record_filmstrip", "rendered_episode",
-           "save_filmstrips"]
+__all__ = ["EpisodeOutcome", "Filmstrip", "RenderingUnavailable", "record_filmstrip", "rendered_episode", "save_filmstrips"]
 
 
 class RenderingUnavailable(TypeError):
@@ -40,8 +39,10 @@ class Filmstrip:
 def _renderable(env: EnvBase) -> EnvBase:
     base = env.base_env if isinstance(env, TransformedEnv) else env
     if not callable(getattr(base, "render", None)):
-        raise RenderingUnavailable(f"{type(base).__name__} cannot render frames (no render method): filmstrips need a "
-                                   "run on a MuJoCo maze env (antmaze_*, humanoidmaze_*)")
+        raise RenderingUnavailable(
+            f"{type(base).__name__} cannot render frames (no render method): filmstrips need a "
+            "run on a MuJoCo maze env (antmaze_*, humanoidmaze_*)"
+        )
     return base
 
 
@@ -61,9 +62,17 @@ class EpisodeOutcome:
 
 
 @torch.no_grad()
-def rendered_episode(env: EnvBase, policy: Policy, *, max_steps: int, every: int, width: int, height: int,
-                     camera: str | None = None, outcome: EpisodeOutcome | None = None
-                     ) -> Iterator[tuple[int, np.ndarray]]:
+def rendered_episode(
+    env: EnvBase,
+    policy: Policy,
+    *,
+    max_steps: int,
+    every: int,
+    width: int,
+    height: int,
+    camera: str | None = None,
+    outcome: EpisodeOutcome | None = None,
+) -> Iterator[tuple[int, np.ndarray]]:
     """Runs one episode of ``policy`` (its deterministic mode) in ``env`` and yields
     ``(step, frame)``: the render after reset (step 0), after every ``every``-th step, and
     after the last step. ``outcome`` (when given) holds the episode's success and length
@@ -103,8 +112,17 @@ def rendered_episode(env: EnvBase, policy: Policy, *, max_steps: int, every: int
             td = step_mdp(td, keep_other=True)
 
 
-def record_filmstrip(env: EnvBase, policy: Policy, *, max_steps: int, frames: int = 6, every: int = 10,
-                     width: int = 240, height: int = 240, camera: str | None = None) -> Filmstrip:
+def record_filmstrip(
+    env: EnvBase,
+    policy: Policy,
+    *,
+    max_steps: int,
+    frames: int = 6,
+    every: int = 10,
+    width: int = 240,
+    height: int = 240,
+    camera: str | None = None,
+) -> Filmstrip:
     """Runs one episode of ``policy`` (see :func:`rendered_episode`) and keeps ``frames``
     evenly spaced frames of it, the first (after reset) and the last included.
 
@@ -123,11 +141,11 @@ def record_filmstrip(env: EnvBase, policy: Policy, *, max_steps: int, frames: in
     if frames < 2:
         raise ValueError(f"need frames >= 2, got {frames}")
     outcome = EpisodeOutcome()
-    steps, candidates = zip(*rendered_episode(env, policy, max_steps=max_steps, every=every, width=width,
-                                              height=height, camera=camera, outcome=outcome))
+    steps, candidates = zip(
+        *rendered_episode(env, policy, max_steps=max_steps, every=every, width=width, height=height, camera=camera, outcome=outcome)
+    )
     keep = _evenly_spaced(frames, len(candidates))
-    return Filmstrip(tuple(candidates[i] for i in keep), tuple(steps[i] for i in keep), outcome.success,
-                     outcome.length)
+    return Filmstrip(tuple(candidates[i] for i in keep), tuple(steps[i] for i in keep), outcome.success, outcome.length)
 
 
 def save_filmstrips(strips: dict[str, Filmstrip], path: str | Path) -> Path:

@@ -28,8 +28,7 @@ from torchrl_causal.evaluation.tables import (
     write_csv,
 )
 
-__all__ = ["Report", "write_report", "kept_command", "kept_notes", "notes_to_keep", "provenance_markdown", "NOTES_BEGIN",
-           "NOTES_END"]
+__all__ = ["Report", "write_report", "kept_command", "kept_notes", "notes_to_keep", "provenance_markdown", "NOTES_BEGIN", "NOTES_END"]
 
 # Hand-written analysis between these markers survives regeneration of the Markdown file.
 NOTES_BEGIN = "<!-- notes: kept when the report is regenerated -->"
@@ -107,7 +106,8 @@ def notes_to_keep(path: str | Path) -> str:
         raise FileExistsError(
             f"{path} has no notes markers ({NOTES_BEGIN} ... {NOTES_END}), so regenerating it would delete any text "
             "written in it by hand: move that text between the two markers (or delete the file, or write elsewhere "
-            "with out= / name=), then rerun")
+            "with out= / name=), then rerun"
+        )
     return notes
 
 
@@ -116,9 +116,13 @@ def _describe_machine(attempt: Mapping[str, Any]) -> str:
     listed = ", ".join(f"{name} {version or 'absent'}" for name, version in packages.items())
     threads = attempt.get("threads")
     cores = attempt.get("cores")
-    return (f"{listed}; Python {attempt.get('python', '?')}; CPU {attempt.get('cpu', '?')}, "
-            f"{threads} thread{'s' if threads != 1 else ''}" + (f" of {cores} cores" if cores else "")
-            + f"; device {attempt.get('device', '?')}" + ("; compiled" if attempt.get("compile") else ""))
+    return (
+        f"{listed}; Python {attempt.get('python', '?')}; CPU {attempt.get('cpu', '?')}, "
+        f"{threads} thread{'s' if threads != 1 else ''}"
+        + (f" of {cores} cores" if cores else "")
+        + f"; device {attempt.get('device', '?')}"
+        + ("; compiled" if attempt.get("compile") else "")
+    )
 
 
 def provenance_markdown(runs: Sequence[RunRecord]) -> str:
@@ -144,8 +148,9 @@ def provenance_markdown(runs: Sequence[RunRecord]) -> str:
             groups["not recorded (trained before package versions were recorded, or the expert row)"].append(name)
         for machine in dict.fromkeys(_describe_machine(attempt) for attempt in recorded):
             groups[machine].append(name)
-    return "\n".join(f"- {machine}: {len(names)} run{'s' if len(names) != 1 else ''} ({', '.join(names)})"
-                     for machine, names in groups.items())
+    return "\n".join(
+        f"- {machine}: {len(names)} run{'s' if len(names) != 1 else ''} ({', '.join(names)})" for machine, names in groups.items()
+    )
 
 
 def kept_command(path: str | Path) -> str | None:
@@ -174,9 +179,15 @@ def _carry(aggregated: dict[Setting, dict], carried: str | Path) -> dict[Setting
     return {setting: labels for setting, labels in added.items() if labels}
 
 
-def write_report(runs_root: str | Path | Sequence[str | Path], out_dir: str | Path | None = None, *, name: str | None = None,
-                 command: str | None = None, carried: str | Path | None = None,
-                 targets: EffectTargets = EffectTargets()) -> Report:
+def write_report(
+    runs_root: str | Path | Sequence[str | Path],
+    out_dir: str | Path | None = None,
+    *,
+    name: str | None = None,
+    command: str | None = None,
+    carried: str | Path | None = None,
+    targets: EffectTargets = EffectTargets(),
+) -> Report:
     """Reads every run below ``runs_root`` (a folder, or several: see
     :func:`~torchrl_causal.evaluation.runs.load_runs`) and writes ``<out_dir>/<name>.{md,csv}``,
     ``<name>_all.csv`` (every setting, with setting columns) and the PNG figures.
@@ -200,8 +211,7 @@ def write_report(runs_root: str | Path | Sequence[str | Path], out_dir: str | Pa
     roots = [Path(runs_root)] if isinstance(runs_root, (str, Path)) else [Path(root) for root in runs_root]
     runs = load_runs(roots)
     if not runs:
-        raise FileNotFoundError(f"no evaluated runs below {', '.join(map(str, roots))} "
-                                "(expected */config.yaml with eval/*.json)")
+        raise FileNotFoundError(f"no evaluated runs below {', '.join(map(str, roots))} (expected */config.yaml with eval/*.json)")
     out_dir = Path(out_dir) if out_dir is not None else roots[0] / "report"
     envs = sorted({run.setting.env for run in runs})
     name = name or (envs[0] if len(envs) == 1 else "report")
@@ -215,7 +225,8 @@ def write_report(runs_root: str | Path | Sequence[str | Path], out_dir: str | Pa
     write_csv(csv_rows(aggregated[main]), report.csv)
     all_rows = [
         {"env": s.env, "horizon": s.horizon, "strength": s.strength, "k": s.k, **row}
-        for s in sorted(aggregated) for row in csv_rows(aggregated[s])
+        for s in sorted(aggregated)
+        for row in csv_rows(aggregated[s])
     ]
     write_csv(all_rows, report.all_csv, columns=("env", "horizon", "strength", "k", *CSV_COLUMNS))
 
@@ -240,19 +251,35 @@ def write_report(runs_root: str | Path | Sequence[str | Path], out_dir: str | Pa
     for setting in ordered:
         table = aggregated[setting]
         seeds = sorted({r.seed for r in runs if r.setting == setting})
-        lines += [f"## {setting.describe()}", "",
-                  f"Seeds: {', '.join(map(str, seeds))}. Normalised E[Y] shifts the worst algorithm of the row to 0 "
-                  "(the reward is purely negative); ± is the return's standard deviation and the success "
-                  "rate's standard error over the pooled episodes (as the paper's Table 1).", ""]
+        lines += [
+            f"## {setting.describe()}",
+            "",
+            f"Seeds: {', '.join(map(str, seeds))}. Normalised E[Y] shifts the worst algorithm of the row to 0 "
+            "(the reward is purely negative); ± is the return's standard deviation and the success "
+            "rate's standard error over the pooled episodes (as the paper's Table 1).",
+            "",
+        ]
         if setting in carried_labels:
-            lines += [f"Carried from `{Path(carried).name}` (an earlier report; their runs' records are not below "
-                      "the runs folder, so the training curves and trajectories do not show them): "
-                      + ", ".join(display_name(label) for label in carried_labels[setting]) + ".", ""]
+            lines += [
+                f"Carried from `{Path(carried).name}` (an earlier report; their runs' records are not below "
+                "the runs folder, so the training curves and trajectories do not show them): "
+                + ", ".join(display_name(label) for label in carried_labels[setting])
+                + ".",
+                "",
+            ]
         for regime in ("deploy", "train"):
             if any(regime in regimes for regimes in table.values()):
                 lines += [f"### {regime.capitalize()} regime (Table 1 layout)", "", table1_markdown(table, regime), ""]
-        lines += ["### Raw E[Y] and success rate", "", raw_markdown(table), "",
-                  "### Mean length of successful episodes", "", lengths_markdown(table), ""]
+        lines += [
+            "### Raw E[Y] and success rate",
+            "",
+            raw_markdown(table),
+            "",
+            "### Mean length of successful episodes",
+            "",
+            lengths_markdown(table),
+            "",
+        ]
         if len(seeds) > 1:
             setting_runs = [r for r in runs if r.setting == setting]
             lines += ["### Across seeds", "", seeds_markdown(setting_runs), ""]
@@ -262,10 +289,15 @@ def write_report(runs_root: str | Path | Sequence[str | Path], out_dir: str | Pa
         checks = effect_checks(table, targets)
         if checks:
             lines += ["### The paper's effect, checked", "", effect_markdown(checks), ""]
-    lines += ["## What made these runs", "",
-              "Package versions, CPU and threads of every training attempt (the runs' `code.json`); another "
-              "CPU, thread count or package version changes floating-point summation order, and the figures with it.",
-              "", provenance_markdown(runs), ""]
+    lines += [
+        "## What made these runs",
+        "",
+        "Package versions, CPU and threads of every training attempt (the runs' `code.json`); another "
+        "CPU, thread count or package version changes floating-point summation order, and the figures with it.",
+        "",
+        provenance_markdown(runs),
+        "",
+    ]
     if report.figures:
         lines += ["## Figures", ""]
         lines += [f"![{title}]({path.name})" for title, path in figures.items() if path is not None]

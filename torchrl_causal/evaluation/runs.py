@@ -117,11 +117,13 @@ def load_run(run_dir: str | Path) -> RunRecord:
     curve_file = run.train_curve_file
     return RunRecord(
         path=run.path,
-        label=run_label(cfg.algo.name, bool(cfg.causal), bool(OmegaConf.select(cfg, "window.window_matched")),
-                        OmegaConf.select(cfg, "window.drop", default=[])),
-        setting=Setting(
-            str(cfg.env.name), int(cfg.env.horizon), float(cfg.env.confounding_strength), int(cfg.window.k)
+        label=run_label(
+            cfg.algo.name,
+            bool(cfg.causal),
+            bool(OmegaConf.select(cfg, "window.window_matched")),
+            OmegaConf.select(cfg, "window.drop", default=[]),
         ),
+        setting=Setting(str(cfg.env.name), int(cfg.env.horizon), float(cfg.env.confounding_strength), int(cfg.window.k)),
         seed=int(cfg.seed),
         evaluations=evaluations,
         curve=read_scalar_csv(curve_file) if curve_file.is_file() else (),
@@ -157,9 +159,11 @@ def load_runs(roots: str | Path | Iterable[str | Path]) -> list[RunRecord]:
             record = load_run(run.path)
             key = (record.setting, record.label, record.seed)
             if key in first_path:
-                raise ValueError(f"{first_path[key]} and {record.path} are both {record.label} seed {record.seed} "
-                                 f"on {record.setting.describe()}: a report would pool them as two seeds; "
-                                 "point runs= at the run roots that hold each run once")
+                raise ValueError(
+                    f"{first_path[key]} and {record.path} are both {record.label} seed {record.seed} "
+                    f"on {record.setting.describe()}: a report would pool them as two seeds; "
+                    "point runs= at the run roots that hold each run once"
+                )
             first_path[key] = record.path
             records.append(record)
     return records
@@ -174,9 +178,14 @@ def _complete_runs(root: Path) -> Iterator[RunDirectory]:
             continue
         status = run.read_status()
         if status.get("status") != "complete":
-            log.warning("left out %s: it is %s (%s of %s %s), so its evaluations are from an earlier budget",
-                        run.path, status.get("status", "without a status"), status.get("progress", "?"),
-                        status.get("total", "?"), status.get("unit", "steps"))
+            log.warning(
+                "left out %s: it is %s (%s of %s %s), so its evaluations are from an earlier budget",
+                run.path,
+                status.get("status", "without a status"),
+                status.get("progress", "?"),
+                status.get("total", "?"),
+                status.get("unit", "steps"),
+            )
             continue
         yield run
 
@@ -197,8 +206,9 @@ def copy_selected_policy(run: RunDirectory, target: RunDirectory) -> Path:
     if state is None:
         raise CheckpointError(f"run {run.path} has no checkpoints/best.pt to ship")
     if set(state) != POLICY_CHECKPOINT_KEYS:
-        raise CheckpointError(f"{run.best_checkpoint} holds {sorted(state)}, not the selected policy alone "
-                              f"({sorted(POLICY_CHECKPOINT_KEYS)})")
+        raise CheckpointError(
+            f"{run.best_checkpoint} holds {sorted(state)}, not the selected policy alone ({sorted(POLICY_CHECKPOINT_KEYS)})"
+        )
     target.best_checkpoint.parent.mkdir(parents=True, exist_ok=True)
     atomic_save(state, target.best_checkpoint)
     return target.best_checkpoint

@@ -42,7 +42,7 @@ def interquartile_mean(values: Sequence[float]) -> float:
         raise ValueError("interquartile_mean needs at least one value")
     ordered = sorted(values)
     cut = len(ordered) // 4
-    kept = ordered[cut:len(ordered) - cut]
+    kept = ordered[cut : len(ordered) - cut]
     return math.fsum(kept) / len(kept)
 
 
@@ -64,8 +64,7 @@ def _percentiles_of_counts(values: np.ndarray, counts: np.ndarray, quantiles: Se
     return out
 
 
-def _exact_distribution(values: Sequence[float], statistic: Callable[[Sequence[float]], float]
-                        ) -> tuple[np.ndarray, np.ndarray]:
+def _exact_distribution(values: Sequence[float], statistic: Callable[[Sequence[float]], float]) -> tuple[np.ndarray, np.ndarray]:
     n = len(values)
     stats, counts = [], []
     for chosen in itertools.combinations_with_replacement(range(n), n):

@@ -50,11 +50,18 @@ __all__ = [
 #: Table 1's row labels in its order (:data:`torchrl_causal.algorithms.TABLE1_ROWS`).
 TABLE1_ALGORITHMS: tuple[str, ...] = tuple(row.name for row in TABLE1_ROWS)
 CSV_COLUMNS: tuple[str, ...] = (
-    "algorithm", "regime", "success_rate", "success_se", "return_mean", "return_std",
-    "ep_len_mean", "ep_len_std", "n_episodes", "seeds",
+    "algorithm",
+    "regime",
+    "success_rate",
+    "success_se",
+    "return_mean",
+    "return_std",
+    "ep_len_mean",
+    "ep_len_std",
+    "n_episodes",
+    "seeds",
 )
 REGIMES: tuple[str, ...] = ("train", "deploy")
-
 
 
 @dataclass(frozen=True)
@@ -85,19 +92,31 @@ class ReportedResult:
     @classmethod
     def from_row(cls, row: Mapping[str, object]) -> ReportedResult:
         """From a results-CSV row (:data:`CSV_COLUMNS`; an empty cell is NaN)."""
+
         def number(key: str) -> float:
             value = row[key]
             return math.nan if value == "" else float(value)
 
-        return cls(str(row["regime"]), *(number(key) for key in (
-            "success_rate", "success_se", "return_mean", "return_std", "ep_len_mean", "ep_len_std")),
-            int(row["n_episodes"]), int(row["seeds"]))
+        return cls(
+            str(row["regime"]),
+            *(number(key) for key in ("success_rate", "success_se", "return_mean", "return_std", "ep_len_mean", "ep_len_std")),
+            int(row["n_episodes"]),
+            int(row["seeds"]),
+        )
 
     def summary(self) -> dict[str, float | int | str]:
         """The metrics as :meth:`EvaluationResult.summary` lists them."""
-        return {"regime": self.regime, "success_rate": self.success_rate, "success_se": self.success_se,
-                "return_mean": self.return_mean, "return_std": self.return_std, "ep_len_mean": self.ep_len_mean,
-                "ep_len_std": self.ep_len_std, "n_episodes": self.n_episodes, "seeds": self.seed_count}
+        return {
+            "regime": self.regime,
+            "success_rate": self.success_rate,
+            "success_se": self.success_se,
+            "return_mean": self.return_mean,
+            "return_std": self.return_std,
+            "ep_len_mean": self.ep_len_mean,
+            "ep_len_std": self.ep_len_std,
+            "n_episodes": self.n_episodes,
+            "seeds": self.seed_count,
+        }
 
 
 # label -> regime -> result pooled over seeds (or an earlier report's row)
@@ -144,16 +163,13 @@ def ordered_labels(labels: Iterable[str]) -> list[str]:
 
 def aggregate(runs: Iterable[RunRecord]) -> dict[Setting, dict[str, dict[str, EvaluationResult]]]:
     """Groups runs by setting and label and pools each regime's episodes over seeds."""
-    grouped: dict[Setting, dict[str, dict[str, list[EvaluationResult]]]] = defaultdict(
-        lambda: defaultdict(lambda: defaultdict(list))
-    )
+    grouped: dict[Setting, dict[str, dict[str, list[EvaluationResult]]]] = defaultdict(lambda: defaultdict(lambda: defaultdict(list)))
     for run in runs:
         for regime, result in run.evaluations.items():
             grouped[run.setting][run.label][regime].append(result)
     return {
         setting: {
-            label: {regime: EvaluationResult.pool(results) for regime, results in regimes.items()}
-            for label, regimes in labels.items()
+            label: {regime: EvaluationResult.pool(results) for regime, results in regimes.items()} for label, regimes in labels.items()
         }
         for setting, labels in grouped.items()
     }
@@ -225,12 +241,8 @@ def table1_markdown(table: Table, regime: str = "deploy") -> str:
     best_success = _best_non_expert(success)
     header = [""] + [display_name(label) for label in labels]
     rows = [
-        ["Norm. E[Y]"] + [
-            _pm(normalised[label], results[label].return_std, bold=label == best_return) for label in labels
-        ],
-        ["Success rate (%)"] + [
-            _pm(success[label], 100 * results[label].success_se, bold=label == best_success) for label in labels
-        ],
+        ["Norm. E[Y]"] + [_pm(normalised[label], results[label].return_std, bold=label == best_return) for label in labels],
+        ["Success rate (%)"] + [_pm(success[label], 100 * results[label].success_se, bold=label == best_success) for label in labels],
     ]
     return _markdown(header, rows)
 
@@ -248,7 +260,8 @@ def raw_markdown(table: Table) -> str:
             result = table[label].get(regime)
             row += (
                 [_pm(result.return_mean, result.return_std), _pm(100 * result.success_rate, 100 * result.success_se)]
-                if result is not None else ["—", "—"]
+                if result is not None
+                else ["—", "—"]
             )
         counts = [str(table[label][regime].n_episodes) if regime in table[label] else "—" for regime in REGIMES]
         seeds = max(int(result.summary()["seeds"]) for result in table[label].values())
@@ -300,9 +313,10 @@ def _results_by_seed(runs: Iterable[RunRecord]) -> dict[str, dict[str, dict[int,
 
 def _success_by_seed(runs: Iterable[RunRecord]) -> dict[str, dict[str, dict[int, float]]]:
     """label -> regime -> {seed: success rate}, seeds in ascending order."""
-    return {label: {regime: {seed: result.success_rate for seed, result in by_seed.items()}
-                    for regime, by_seed in regimes.items()}
-            for label, regimes in _results_by_seed(runs).items()}
+    return {
+        label: {regime: {seed: result.success_rate for seed, result in by_seed.items()} for regime, by_seed in regimes.items()}
+        for label, regimes in _results_by_seed(runs).items()
+    }
 
 
 def iqm_with_interval(values: Sequence[float], digits: int = 1) -> str:
@@ -336,8 +350,12 @@ def seeds_markdown(runs: Iterable[RunRecord]) -> str:
     results = _results_by_seed(runs)
     header = ["Algorithm"]
     for regime in REGIMES:
-        header += [f"SR % per seed ({regime})", f"pooled SR % ({regime})", f"mean ± SE over seeds ({regime})",
-                   f"IQM [95% bootstrap CI] over seeds ({regime})"]
+        header += [
+            f"SR % per seed ({regime})",
+            f"pooled SR % ({regime})",
+            f"mean ± SE over seeds ({regime})",
+            f"IQM [95% bootstrap CI] over seeds ({regime})",
+        ]
     rows = []
     for label in ordered_labels(results):
         row = [display_name(label)]
@@ -403,8 +421,7 @@ class EffectTargets:
                 raise ValueError(f"EffectTargets' thresholds must be finite and >= 0, got {name}={value!r}")
         for name in ("causal_fraction", "non_causal_fraction"):
             if getattr(self, name) > 1:
-                raise ValueError(f"EffectTargets' {name} is a fraction of the expert's success, in [0, 1], "
-                                 f"got {getattr(self, name)!r}")
+                raise ValueError(f"EffectTargets' {name} is a fraction of the expert's success, in [0, 1], got {getattr(self, name)!r}")
 
 
 def effect_checks(table: Table, targets: EffectTargets = EffectTargets()) -> list[EffectCheck]:
@@ -427,31 +444,37 @@ def effect_checks(table: Table, targets: EffectTargets = EffectTargets()) -> lis
         for label in ("c_sqil", "c_iq_learn"):
             value = rate(label, "deploy")
             if value is not None:
-                checks.append(EffectCheck(
-                    f"{display_name(label)} deploy success >= {causal_fraction:.0%} of the expert's",
-                    f"{100 * value:.1f}% vs {100 * expert:.1f}% ({value / expert:.0%})" if expert else f"{100 * value:.1f}%",
-                    value >= causal_fraction * expert,
-                    100 * (value - causal_fraction * expert),
-                ))
+                checks.append(
+                    EffectCheck(
+                        f"{display_name(label)} deploy success >= {causal_fraction:.0%} of the expert's",
+                        f"{100 * value:.1f}% vs {100 * expert:.1f}% ({value / expert:.0%})" if expert else f"{100 * value:.1f}%",
+                        value >= causal_fraction * expert,
+                        100 * (value - causal_fraction * expert),
+                    )
+                )
         for label in ("bc", "gail", "sqil", "iq_learn"):
             value = rate(label, "deploy")
             if value is not None:
-                checks.append(EffectCheck(
-                    f"{display_name(label)} deploy success <= {non_causal_fraction:.0%} of the expert's",
-                    f"{100 * value:.1f}% vs {100 * expert:.1f}%",
-                    value <= non_causal_fraction * expert,
-                    100 * (non_causal_fraction * expert - value),
-                ))
+                checks.append(
+                    EffectCheck(
+                        f"{display_name(label)} deploy success <= {non_causal_fraction:.0%} of the expert's",
+                        f"{100 * value:.1f}% vs {100 * expert:.1f}%",
+                        value <= non_causal_fraction * expert,
+                        100 * (non_causal_fraction * expert - value),
+                    )
+                )
     for label in ("bc", "gail", "sqil", "iq_learn"):
         plain, causal = rate(label, "train"), rate(f"c_{label}", "train")
         if plain is not None and causal is not None:
             gap = 100 * (plain - causal)
-            checks.append(EffectCheck(
-                f"{display_name(label)} within {train_gap_points:g} points of {display_name('c_' + label)} (train regime)",
-                f"{100 * plain:.1f}% vs {100 * causal:.1f}% ({gap:+.1f} points)",
-                abs(gap) <= train_gap_points,
-                train_gap_points - abs(gap),
-            ))
+            checks.append(
+                EffectCheck(
+                    f"{display_name(label)} within {train_gap_points:g} points of {display_name('c_' + label)} (train regime)",
+                    f"{100 * plain:.1f}% vs {100 * causal:.1f}% ({gap:+.1f} points)",
+                    abs(gap) <= train_gap_points,
+                    train_gap_points - abs(gap),
+                )
+            )
     return checks
 
 
@@ -472,15 +495,15 @@ def seed_effect_checks(runs: Iterable[RunRecord], targets: EffectTargets = Effec
         if not by_seed or not expert_rate:
             continue
         fractions = {seed: rate / expert_rate for seed, rate in by_seed.items()}
-        checks.append(EffectCheck(
-            f"{display_name(label)} deploy success >= {causal_fraction:.0%} of the expert's in every seed",
-            ", ".join(f"seed {seed}: {fraction:.0%}" for seed, fraction in fractions.items()),
-            all(fraction >= causal_fraction for fraction in fractions.values()),
-        ))
+        checks.append(
+            EffectCheck(
+                f"{display_name(label)} deploy success >= {causal_fraction:.0%} of the expert's in every seed",
+                ", ".join(f"seed {seed}: {fraction:.0%}" for seed, fraction in fractions.items()),
+                all(fraction >= causal_fraction for fraction in fractions.values()),
+            )
+        )
     return checks
 
 
 def effect_markdown(checks: Sequence[EffectCheck]) -> str:
-    return _markdown(
-        ["Claim", "Measured", "Holds"], [[c.claim, c.measured, "yes" if c.passed else "**no**"] for c in checks]
-    )
+    return _markdown(["Claim", "Measured", "Holds"], [[c.claim, c.measured, "yes" if c.passed else "**no**"] for c in checks])

@@ -57,6 +57,7 @@ class VideoFile:
         :class:`~torchrl.record.VideoRecorder` passes it); ``name`` and ``step`` are unused."""
         require_extra("writing videos", "imageio")
         import imageio.v3 as iio
+
         frames = video.reshape(-1, *video.shape[-3:]).permute(0, 2, 3, 1).contiguous().numpy()
         fps = int(kwargs.get("fps", self.fps))
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -91,8 +92,18 @@ class RecordedVideo:
     length: int
 
 
-def record_video(env: EnvBase, policy: Policy, path: str | Path, *, max_steps: int, every: int = 1, fps: int = 30,
-                 width: int = 240, height: int = 240, camera: str | None = None) -> RecordedVideo:
+def record_video(
+    env: EnvBase,
+    policy: Policy,
+    path: str | Path,
+    *,
+    max_steps: int,
+    every: int = 1,
+    fps: int = 30,
+    width: int = 240,
+    height: int = 240,
+    camera: str | None = None,
+) -> RecordedVideo:
     """Records one episode of ``policy`` in ``env`` to ``path`` (``.mp4`` or ``.gif``).
 
     The frames (the render after reset, after every ``every``-th step and after the last;
@@ -112,8 +123,9 @@ def record_video(env: EnvBase, policy: Policy, path: str | Path, *, max_steps: i
     recorder = VideoRecorder(logger=writer, tag=Path(path).stem, in_keys=["pixels"], skip=1, make_grid=False)
     outcome = EpisodeOutcome()
     frames = 0
-    for _, frame in rendered_episode(env, policy, max_steps=max_steps, every=every, width=width, height=height,
-                                     camera=camera, outcome=outcome):
+    for _, frame in rendered_episode(
+        env, policy, max_steps=max_steps, every=every, width=width, height=height, camera=camera, outcome=outcome
+    ):
         recorder(TensorDict({"pixels": torch.from_numpy(np.ascontiguousarray(frame))}))
         frames += 1
     recorder.dump()

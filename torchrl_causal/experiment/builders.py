@@ -94,16 +94,23 @@ def instantiate_with_strings(node: DictConfig) -> Any:
 
 def make_env(cfg: DictConfig, regime: str, batch_size: int, seed: int) -> EnvBase:
     """The raw confounded env of ``cfg.env`` (every key, latent ones included)."""
-    return instantiate(cfg.env.make, regime=regime, batch_size=(batch_size,), horizon=cfg.env.horizon,
-                       confounding_strength=cfg.env.confounding_strength, seed=seed)
+    return instantiate(
+        cfg.env.make,
+        regime=regime,
+        batch_size=(batch_size,),
+        horizon=cfg.env.horizon,
+        confounding_strength=cfg.env.confounding_strength,
+        seed=seed,
+    )
 
 
 def make_window(cfg: DictConfig) -> AdjustmentWindow:
     """The adjustment window the imitator conditions on (``cfg.causal``, ``cfg.window``)."""
     env = make_env(cfg, "train", 1, cfg.seed)
     try:
-        window = CausalWindowTransform.from_env(env, cfg.window.k, causal=cfg.causal, mode=WindowMode(cfg.window.mode).value,
-                                                window_matched=cfg.window.window_matched).window
+        window = CausalWindowTransform.from_env(
+            env, cfg.window.k, causal=cfg.causal, mode=WindowMode(cfg.window.mode).value, window_matched=cfg.window.window_matched
+        ).window
         try:
             return window.without(cfg.window.drop)
         except ValueError as error:
@@ -172,8 +179,7 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
         # run or another collected the set would change every later draw of the training.
         try:
             with torch.random.fork_rng():
-                collect_demonstrations(env, make_expert(cfg, env), episodes, path, seed=cfg.demos.seed,
-                                       progress=cfg.progress_bar)
+                collect_demonstrations(env, make_expert(cfg, env), episodes, path, seed=cfg.demos.seed, progress=cfg.progress_bar)
         except OSError:
             if not path.exists():
                 raise
@@ -183,13 +189,19 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
     try:
         demonstrations = load_source(cfg.demos.source, path, expected=reference)
     except DatasetError as error:
-        raise DatasetError(f"{error}. Delete {path} and rerun to collect the set again (demos.seed "
-                           f"{cfg.demos.seed}), or point demos.path at a good copy") from None
+        raise DatasetError(
+            f"{error}. Delete {path} and rerun to collect the set again (demos.seed {cfg.demos.seed}), or point demos.path at a good copy"
+        ) from None
     if not cfg.demos.successful_only:
         return demonstrations
     kept = successful_episodes(demonstrations)
-    log.info("demos.successful_only: %d of %d demonstration episodes reached the goal (%d of %d transitions kept)",
-             int(kept["is_init"].sum()), int(demonstrations["is_init"].sum()), kept.shape[0], demonstrations.shape[0])
+    log.info(
+        "demos.successful_only: %d of %d demonstration episodes reached the goal (%d of %d transitions kept)",
+        int(kept["is_init"].sum()),
+        int(demonstrations["is_init"].sum()),
+        kept.shape[0],
+        demonstrations.shape[0],
+    )
     return kept
 
 
@@ -206,8 +218,10 @@ def check_demonstrations(cfg: DictConfig) -> None:
     except DatasetError as error:
         if minari_reference(cfg.demos.source) is not None:
             raise
-        raise DatasetError(f"{error}. Delete {cfg.demos.path} and rerun to collect the set again (demos.seed "
-                           f"{cfg.demos.seed}), or point demos.path at a good copy") from None
+        raise DatasetError(
+            f"{error}. Delete {cfg.demos.path} and rerun to collect the set again (demos.seed "
+            f"{cfg.demos.seed}), or point demos.path at a good copy"
+        ) from None
     finally:
         env.close()
 

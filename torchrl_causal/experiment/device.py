@@ -84,8 +84,9 @@ def resolve_device(spec: str | torch.device) -> torch.device:
         raise ValueError(f"device={spec!r} is not a device name: use cpu, cuda, cuda:N, mps or auto") from err
     problem = _available(device)
     if problem is not None:
-        raise ValueError(f"device={spec!r} cannot be used here: {problem}. Use device=cpu, or device=auto to take "
-                         "a GPU only when one is present.")
+        raise ValueError(
+            f"device={spec!r} cannot be used here: {problem}. Use device=cpu, or device=auto to take a GPU only when one is present."
+        )
     if device.type == "cuda" and device.index is None:
         device = torch.device("cuda", torch.cuda.current_device())
     return device

@@ -114,8 +114,11 @@ def signals_raise() -> Iterator[None]:
             if not _chained(handler):
                 raise
             signal.signal(stop.signal_number, handler)
-            log.warning("%s: passing it on to the handler that was installed before the run (%s)", stop.signal_name,
-                        getattr(handler, "__qualname__", handler))
+            log.warning(
+                "%s: passing it on to the handler that was installed before the run (%s)",
+                stop.signal_name,
+                getattr(handler, "__qualname__", handler),
+            )
             handler(stop.signal_number, None)
             raise
 
@@ -130,8 +133,9 @@ class DeferredSignals:
         if self.received is not None:
             raise RunInterrupted(number, f"{signal.Signals(number).name} again: stopping without a checkpoint")
         self.received = number
-        log.warning("%s received: finishing the current step, then checkpointing (send it again to stop at once)",
-                    signal.Signals(number).name)
+        log.warning(
+            "%s received: finishing the current step, then checkpointing (send it again to stop at once)", signal.Signals(number).name
+        )
 
 
 @contextmanager
@@ -199,8 +203,10 @@ def run_in_processes(function: Callable[[Any], int], tasks: Sequence[Any], worke
 
     def forward(number: int, frame: FrameType | None) -> None:
         if not stop.is_set():
-            log.warning("%s received: no new run starts; the runs in flight checkpoint and stop (send it again to "
-                        "stop them at once)", signal.Signals(number).name)
+            log.warning(
+                "%s received: no new run starts; the runs in flight checkpoint and stop (send it again to stop them at once)",
+                signal.Signals(number).name,
+            )
         stop.set()
         for process in running.values():
             if process.pid is not None and process.exitcode is None:

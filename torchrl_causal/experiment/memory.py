@@ -40,9 +40,20 @@ from torchrl.data import Composite, TensorSpec
 from torchrl_causal.experiment.builders import make_env, make_imitator_env, make_window
 from torchrl_causal.experiment.schema import ConfigValueError, GAILConfig, OffPolicyConfig
 
-__all__ = ["GB", "LIBRARIES_BYTES", "Footprint", "available_memory", "check_footprint", "check_run_fits",
-           "encoded_transition_bytes", "free_disk", "measured_transition_bytes", "run_footprint", "spec_bytes",
-           "transition_bytes"]
+__all__ = [
+    "GB",
+    "LIBRARIES_BYTES",
+    "Footprint",
+    "available_memory",
+    "check_footprint",
+    "check_run_fits",
+    "encoded_transition_bytes",
+    "free_disk",
+    "measured_transition_bytes",
+    "run_footprint",
+    "spec_bytes",
+    "transition_bytes",
+]
 
 GB = 1 << 30
 #: Resident memory of a process that imported the package (torch, TorchRL, MuJoCo):
@@ -131,8 +142,7 @@ def run_footprint(cfg: DictConfig) -> Footprint:
     finally:
         base.close()
     if not cfg.algo.trainer:  # the expert row only evaluates
-        return Footprint(ram={"libraries": LIBRARIES_BYTES,
-                              "evaluation envs (eval.num_envs)": 4 * cfg.eval.num_envs * raw_step}, disk={})
+        return Footprint(ram={"libraries": LIBRARIES_BYTES, "evaluation envs (eval.num_envs)": 4 * cfg.eval.num_envs * raw_step}, disk={})
     step = encoded_transition_bytes(cfg)
     algo, schema = cfg.algo, OmegaConf.get_type(cfg.algo)
     demos = _demonstration_transitions(cfg)
@@ -149,8 +159,7 @@ def run_footprint(cfg: DictConfig) -> Footprint:
         ram["collector batches (algo.frames_per_batch x window.k)"] = 2 * algo.frames_per_batch * step
         disk["policy replay buffer (algo.buffer_size x window.k)"] = min(algo.buffer_size, algo.total_steps) * step
     elif schema is GAILConfig:
-        ram["GAIL rollouts (algo.episodes_per_round x env.horizon x window.k)"] = (
-            2 * algo.episodes_per_round * cfg.env.horizon * step)
+        ram["GAIL rollouts (algo.episodes_per_round x env.horizon x window.k)"] = 2 * algo.episodes_per_round * cfg.env.horizon * step
     return Footprint(ram=ram, disk=disk)
 
 
@@ -213,12 +222,14 @@ def check_footprint(footprint: Footprint, *, available_ram: int, free_disk: int)
         raise ConfigValueError(
             f"this run needs an estimated {_size(footprint.ram_bytes)} of memory ({_largest(footprint.ram)}) "
             f"and {_size(available_ram)} are available: lower the keys named (a smaller window.k, fewer "
-            "demos.episodes or envs), or raise max_memory_gb if this machine has more to give")
+            "demos.episodes or envs), or raise max_memory_gb if this machine has more to give"
+        )
     if footprint.disk_bytes > free_disk:
         raise ConfigValueError(
             f"this run needs an estimated {_size(footprint.disk_bytes)} of disk ({_largest(footprint.disk)}) "
             f"and the run root's file system has {_size(free_disk)} free: lower the keys named, or choose "
-            "another run_root")
+            "another run_root"
+        )
 
 
 def check_run_fits(cfg: DictConfig) -> Footprint:
@@ -229,4 +240,3 @@ def check_run_fits(cfg: DictConfig) -> Footprint:
     ram = available_memory() if limit is None else int(float(limit) * GB)
     check_footprint(footprint, available_ram=ram, free_disk=free_disk(cfg.run_dir))
     return footprint
-

@@ -26,16 +26,24 @@ from typing import Any
 
 import torch
 
-__all__ = ["PACKAGE_DIR", "PACKAGES", "RUNTIME_FIELDS", "attempt_identity", "cpu_model", "identity_changes",
-           "machine_identity", "package_versions", "source_fingerprint"]
+__all__ = [
+    "PACKAGE_DIR",
+    "PACKAGES",
+    "RUNTIME_FIELDS",
+    "attempt_identity",
+    "cpu_model",
+    "identity_changes",
+    "machine_identity",
+    "package_versions",
+    "source_fingerprint",
+]
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 
 #: The fields of an attempt that change a run's numbers when they change (another CPU or
 #: thread count changes floating-point summation order; another numpy, mujoco or TorchRL
 #: changes the envs' and collectors' arithmetic).
-RUNTIME_FIELDS: tuple[str, ...] = ("source", "torch", "packages", "cpu", "threads", "demonstrations", "compile",
-                                   "device")
+RUNTIME_FIELDS: tuple[str, ...] = ("source", "torch", "packages", "cpu", "threads", "demonstrations", "compile", "device")
 
 #: The distributions whose versions a run records (their import names differ for two).
 PACKAGES: tuple[str, ...] = ("torch", "torchrl", "tensordict", "numpy", "mujoco", "gymnasium", "hydra-core")
@@ -104,8 +112,7 @@ def machine_identity() -> dict[str, object]:
         >>> sorted(machine_identity())
         ['cores', 'cpu', 'packages', 'threads']
     """
-    return {"packages": package_versions(), "cpu": cpu_model(), "threads": torch.get_num_threads(),
-            "cores": os.cpu_count()}
+    return {"packages": package_versions(), "cpu": cpu_model(), "threads": torch.get_num_threads(), "cores": os.cpu_count()}
 
 
 def attempt_identity(demonstrations: str | None, compile: bool, device: str | torch.device) -> dict[str, Any]:
@@ -119,9 +126,15 @@ def attempt_identity(demonstrations: str | None, compile: bool, device: str | to
         >>> sorted(identity), identity["demonstrations"]
         (['compile', 'cores', 'cpu', 'demonstrations', 'device', 'packages', 'python', 'source', 'threads', 'torch'], 'b34e70289b3d')
     """
-    return {"source": source_fingerprint(), "torch": torch.__version__, "python": sys.version.split()[0],
-            "demonstrations": None if demonstrations is None else demonstrations[:12], "compile": bool(compile),
-            "device": str(device), **machine_identity()}
+    return {
+        "source": source_fingerprint(),
+        "torch": torch.__version__,
+        "python": sys.version.split()[0],
+        "demonstrations": None if demonstrations is None else demonstrations[:12],
+        "compile": bool(compile),
+        "device": str(device),
+        **machine_identity(),
+    }
 
 
 def identity_changes(previous: Mapping[str, Any], current: Mapping[str, Any]) -> dict[str, tuple[Any, Any]]:
@@ -134,5 +147,6 @@ def identity_changes(previous: Mapping[str, Any], current: Mapping[str, Any]) ->
         ...                  {"source": "b", "torch": "2.13.0", "compile": True, "device": "cpu", "threads": 2})
         {'source': ('a', 'b'), 'compile': (False, True)}
     """
-    return {key: (previous.get(key), current.get(key)) for key in RUNTIME_FIELDS
-            if key in previous and previous.get(key) != current.get(key)}
+    return {
+        key: (previous.get(key), current.get(key)) for key in RUNTIME_FIELDS if key in previous and previous.get(key) != current.get(key)
+    }

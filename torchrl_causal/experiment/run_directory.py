@@ -85,8 +85,19 @@ TRAIN_CURVE = "eval/train_return"  # scalar logged at every periodic train-regim
 #: Config keys that change how a run executes or where it writes, never its numbers: they
 #: may differ between the attempts of one run (a resume on another machine, more threads).
 RUNTIME_KEYS: tuple[str, ...] = (
-    "resume", "progress_bar", "threads", "device", "compile", "log_every", "checkpoint_every_s", "max_memory_gb", "logger",
-    "run_root", "run_name", "run_dir", "demos.path",
+    "resume",
+    "progress_bar",
+    "threads",
+    "device",
+    "compile",
+    "log_every",
+    "checkpoint_every_s",
+    "max_memory_gb",
+    "logger",
+    "run_root",
+    "run_name",
+    "run_dir",
+    "demos.path",
 )
 
 
@@ -150,10 +161,14 @@ def atomic_save(obj: Any, path: Path) -> None:
 
 def _checkpoint_remedy(path: Path) -> str:
     if path.name == "best.pt":
-        return ("nothing was changed; it is the run's selected policy, which only training selects again: train the "
-                "run again with its command and resume=false")
-    return ("nothing was changed; delete it and rerun the run's command with resume=false to train it again from "
-            "the start (best.pt holds the selected policy only, which cannot resume training)")
+        return (
+            "nothing was changed; it is the run's selected policy, which only training selects again: train the "
+            "run again with its command and resume=false"
+        )
+    return (
+        "nothing was changed; delete it and rerun the run's command with resume=false to train it again from "
+        "the start (best.pt holds the selected policy only, which cannot resume training)"
+    )
 
 
 def load_checkpoint(path: Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
@@ -162,11 +177,11 @@ def load_checkpoint(path: Path, map_location: str | torch.device = "cpu") -> dic
     try:
         state = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as err:  # pickle, zip and unpickler errors all mean the same here
-        raise CheckpointError(f"checkpoint {path} is corrupted or not a torchrl-causal checkpoint "
-                              f"({type(err).__name__}): {_checkpoint_remedy(path)}") from err
+        raise CheckpointError(
+            f"checkpoint {path} is corrupted or not a torchrl-causal checkpoint ({type(err).__name__}): {_checkpoint_remedy(path)}"
+        ) from err
     if not isinstance(state, dict) or "progress" not in state:
-        raise CheckpointError(f"checkpoint {path} lacks the 'progress' entry of a torchrl-causal checkpoint: "
-                              f"{_checkpoint_remedy(path)}")
+        raise CheckpointError(f"checkpoint {path} lacks the 'progress' entry of a torchrl-causal checkpoint: {_checkpoint_remedy(path)}")
     return state
 
 
@@ -181,8 +196,7 @@ def _flatten(node: Any, prefix: str = "") -> dict[str, Any]:
 
 def _identity(config: Mapping[str, Any], ignored: Iterable[str]) -> dict[str, Any]:
     ignored = tuple(ignored)
-    return {key: value for key, value in _flatten(config).items()
-            if not any(key == skip or key.startswith(f"{skip}.") for skip in ignored)}
+    return {key: value for key, value in _flatten(config).items() if not any(key == skip or key.startswith(f"{skip}.") for skip in ignored)}
 
 
 def changed_keys(old: Mapping[str, Any], new: Mapping[str, Any], ignored: Iterable[str] = RUNTIME_KEYS) -> dict[str, tuple[Any, Any]]:
@@ -290,8 +304,14 @@ class RunDirectory:
         evaluation record and the periodic evaluations' scalars (the training curve among
         them); what reports read back, without the checkpoints, replay data and training
         logs that training and re-evaluation need."""
-        files = [self.config_file, self.window_file, self.status_file, self.code_file,
-                 *sorted((self.path / EVAL_DIR).glob("*.json")), *sorted(self.train_curve_file.parent.glob("*.csv"))]
+        files = [
+            self.config_file,
+            self.window_file,
+            self.status_file,
+            self.code_file,
+            *sorted((self.path / EVAL_DIR).glob("*.json")),
+            *sorted(self.train_curve_file.parent.glob("*.csv")),
+        ]
         return [path for path in files if path.is_file()]
 
     # ------------------------------------------------------------------ config
@@ -308,8 +328,10 @@ class RunDirectory:
         try:
             config = OmegaConf.load(self.config_file)
         except Exception as error:  # YAML scanner and parser errors, OmegaConf's own
-            raise RunFileError(f"{self.config_file} is corrupted ({_first_line(error)}): restore it (an archive "
-                               "under results/runs keeps a copy) or train the run again") from None
+            raise RunFileError(
+                f"{self.config_file} is corrupted ({_first_line(error)}): restore it (an archive "
+                "under results/runs keeps a copy) or train the run again"
+            ) from None
         if not isinstance(config, DictConfig):
             raise RunFileError(f"{self.config_file} is corrupted (not a mapping): restore it or train the run again")
         return config
@@ -331,7 +353,8 @@ class RunDirectory:
                 listed = "; ".join(f"{key}: {old!r} -> {new!r}" for key, (old, new) in changes.items())
                 raise ConfigMismatchError(
                     f"{self.path} holds a run of another config ({listed}). Nothing was changed: choose another "
-                    "run_root or run_name, or pass resume=false to discard that run and start this one there.")
+                    "run_root or run_name, or pass resume=false to discard that run and start this one there."
+                )
         atomic_write_text(self.config_file, OmegaConf.to_yaml(resolved))
 
     def discard(self) -> None:
@@ -378,7 +401,8 @@ class RunDirectory:
             handle.close()
             raise RunInUseError(
                 f"{self.path} is being run by {holder}. Wait for it to finish, or stop it (it checkpoints on "
-                "SIGTERM), then rerun this command to resume.") from None
+                "SIGTERM), then rerun this command to resume."
+            ) from None
         try:
             handle.truncate(0)
             handle.write(f"pid {os.getpid()} on {socket.gethostname()}\n")

@@ -72,8 +72,9 @@ class ConfigValueError(TorchRLCausalError, ValueError):
     without the expert every algorithm needs)."""
 
 
-def _ranged(*, ge: float | None = None, gt: float | None = None, le: float | None = None,
-            lt: float | None = None, default: Any = MISSING) -> Any:
+def _ranged(
+    *, ge: float | None = None, gt: float | None = None, le: float | None = None, lt: float | None = None, default: Any = MISSING
+) -> Any:
     bounds = {name: value for name, value in (("ge", ge), ("gt", gt), ("le", le), ("lt", lt)) if value is not None}
     return field(default=default, metadata=bounds)
 
@@ -90,8 +91,7 @@ def positive(default: Any = MISSING) -> Any:
 
 def unit_interval(*, open_low: bool = False, open_high: bool = False, default: Any = MISSING) -> Any:
     """A float field in ``[0, 1]`` (either end optionally open)."""
-    return _ranged(**({"gt": 0.0} if open_low else {"ge": 0.0}), **({"lt": 1.0} if open_high else {"le": 1.0}),
-                   default=default)
+    return _ranged(**({"gt": 0.0} if open_low else {"ge": 0.0}), **({"lt": 1.0} if open_high else {"le": 1.0}), default=default)
 
 
 _BOUND_TEXT = {"ge": ">=", "gt": ">", "le": "<=", "lt": "<"}
@@ -537,16 +537,19 @@ def _check_known_keys(cfg: DictConfig) -> None:
     schema = algo_schema(str(OmegaConf.select(cfg, "algo.name")))
     close = difflib.get_close_matches(key, _known_keys(Config) + _known_keys(schema, "algo."), n=1)
     hint = f"; did you mean {close[0]}?" if close else ""
-    raise ConfigValueError(f"config key {key} is unknown (added with +{key}=...?): no schema declares it, so the run "
-                           f"would store it and ignore it{hint}")
+    raise ConfigValueError(
+        f"config key {key} is unknown (added with +{key}=...?): no schema declares it, so the run would store it and ignore it{hint}"
+    )
 
 
 def _check_sizes(cfg: DictConfig) -> None:
     """Sizes that must agree with each other; what they cost in memory is checked with the
     window built (:mod:`~torchrl_causal.experiment.memory`)."""
     if cfg.window.k >= cfg.env.horizon:
-        raise ConfigValueError(f"window.k={cfg.window.k} must be < env.horizon={cfg.env.horizon}: a window reaches "
-                               "at most horizon - 1 steps back (each lag adds a copy of the state to every observation)")
+        raise ConfigValueError(
+            f"window.k={cfg.window.k} must be < env.horizon={cfg.env.horizon}: a window reaches "
+            "at most horizon - 1 steps back (each lag adds a copy of the state to every observation)"
+        )
 
 
 def _check_expert(cfg: DictConfig) -> None:
@@ -556,7 +559,8 @@ def _check_expert(cfg: DictConfig) -> None:
             "(demonstrations, or the expert row). HumanoidMaze's expert (HumanoidMazeExpert) needs its walking "
             "skill's weights, which this library does not ship yet (`python -m torchrl_causal.envs.locomotion "
             "--skill humanoid`, ~7-10 CPU-hours); then pass "
-            "env.expert._target_=torchrl_causal.envs.HumanoidMazeExpert, or your own class taking the env.")
+            "env.expert._target_=torchrl_causal.envs.HumanoidMazeExpert, or your own class taking the env."
+        )
 
 
 def _check_device(cfg: DictConfig) -> None:
@@ -573,20 +577,28 @@ def _check_algorithm(cfg: DictConfig) -> None:
     """What one algorithm needs beyond the ranges of its fields."""
     algo, schema = cfg.algo, OmegaConf.get_type(cfg.algo)
     if schema is GAILConfig and algo.actor.dropout != 0:
-        raise ConfigValueError(f"algo.actor.dropout must be 0 for GAIL, got {algo.actor.dropout}: PPO's probability "
-                               "ratio needs the actor that collected the rollout, not a copy with a fresh dropout mask")
+        raise ConfigValueError(
+            f"algo.actor.dropout must be 0 for GAIL, got {algo.actor.dropout}: PPO's probability "
+            "ratio needs the actor that collected the rollout, not a copy with a fresh dropout mask"
+        )
     if not issubclass(schema, OffPolicyConfig):
         return
     if algo.total_steps <= algo.random_steps:
-        raise ConfigValueError(f"algo.total_steps={algo.total_steps} must be > algo.random_steps={algo.random_steps}: "
-                               "the run would end in its random warm-up without a gradient step; raise "
-                               "algo.total_steps or lower algo.random_steps")
+        raise ConfigValueError(
+            f"algo.total_steps={algo.total_steps} must be > algo.random_steps={algo.random_steps}: "
+            "the run would end in its random warm-up without a gradient step; raise "
+            "algo.total_steps or lower algo.random_steps"
+        )
     if algo.random_steps % algo.frames_per_batch:
-        raise ConfigValueError(f"algo.random_steps={algo.random_steps} must be a multiple of algo.frames_per_batch="
-                               f"{algo.frames_per_batch}: random actions are drawn for whole collector batches")
+        raise ConfigValueError(
+            f"algo.random_steps={algo.random_steps} must be a multiple of algo.frames_per_batch="
+            f"{algo.frames_per_batch}: random actions are drawn for whole collector batches"
+        )
     if algo.num_envs % cfg.collector_workers:
-        raise ConfigValueError(f"collector_workers={cfg.collector_workers} must divide algo.num_envs={algo.num_envs}: "
-                               "each worker process steps the same number of envs")
+        raise ConfigValueError(
+            f"collector_workers={cfg.collector_workers} must divide algo.num_envs={algo.num_envs}: "
+            "each worker process steps the same number of envs"
+        )
 
 
 def _check_target_entropy(cfg: DictConfig) -> None:

@@ -112,10 +112,7 @@ class BoundedInfluence:
     def message(self) -> str:
         chain = self.chain_text
         if self.required_k is None:
-            return (
-                "extended parents reach arbitrarily far back, so Assumption 1(i) fails for every k; "
-                f"at horizon {self.horizon}: {chain}"
-            )
+            return f"extended parents reach arbitrarily far back, so Assumption 1(i) fails for every k; at horizon {self.horizon}: {chain}"
         verdict = "" if self.k is None else (" (holds)" if self.holds else f" (fails for k={self.k})")
         return f"Assumption 1(i) needs k >= {self.required_k}{verdict}: {chain}"
 
@@ -338,9 +335,7 @@ def _window(template: TimeSliceTemplate, variables: Iterable[str], k: int, exact
     )
 
 
-def _window_failures(
-    template: TimeSliceTemplate, window: AdjustmentWindow, stop_at_first: bool
-) -> list[tuple[int, BackdoorReport]]:
+def _window_failures(template: TimeSliceTemplate, window: AdjustmentWindow, stop_at_first: bool) -> list[tuple[int, BackdoorReport]]:
     """The verification horizons at which the window's family fails Definition 2, with the
     report there (the first ``k`` actions only, except at the longest horizon)."""
     action, k = template.action, window.k
@@ -390,9 +385,7 @@ def _searched_windows(template: TimeSliceTemplate, k: int, tried: AdjustmentWind
             yield window
 
 
-def windowed_adjustment(
-    template: TimeSliceTemplate, k: int, mode: Literal["exact", "relaxed"] = "exact"
-) -> AdjustmentWindow:
+def windowed_adjustment(template: TimeSliceTemplate, k: int, mode: Literal["exact", "relaxed"] = "exact") -> AdjustmentWindow:
     """The paper's Algorithm 1: a fixed window of ``k`` past steps to condition on.
 
     ``mode="exact"`` runs FindOX on the horizon-``(k+1)`` proxy, builds the Markov

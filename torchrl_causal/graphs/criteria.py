@@ -180,8 +180,7 @@ def _adjustment_ids(
         given = adjustment[names[x]]
         if isinstance(given, str) or not isinstance(given, Iterable):
             raise GraphError(
-                f"the adjustment set of {names[x]!r} must be a collection of nodes, got {given!r}; "
-                f"write a single node as {{{given!r}}}"
+                f"the adjustment set of {names[x]!r} must be a collection of nodes, got {given!r}; write a single node as {{{given!r}}}"
             )
         try:
             z = set(map(index.__getitem__, given))
@@ -400,8 +399,16 @@ class _ComponentGraph:
             return v in held or v in actions and v in keys and rank[v] > before_rank
 
         path = find_open_path(
-            g.parents, g.children, g.siblings, [source], conditioned, collider_open, target, self.nodes.__contains__,
-            cut=action, fixed=fixed,
+            g.parents,
+            g.children,
+            g.siblings,
+            [source],
+            conditioned,
+            collider_open,
+            target,
+            self.nodes.__contains__,
+            cut=action,
+            fixed=fixed,
         )
         return path is None
 
@@ -491,12 +498,17 @@ def _certificate(g: CausalDiagram, action_ids: list[int], x: int, y: int) -> tup
     if y not in reach(indexed.children, [x], within=lambda c: c not in later):
         return None
     favourable_parents = [() if v in later else p for v, p in enumerate(indexed.parents)]
-    conditioned = {
-        v for v in {x, y} | reach(favourable_parents, [x, y]) if v not in latent and rank[v] < rank[x]
-    }
+    conditioned = {v for v in {x, y} | reach(favourable_parents, [x, y]) if v not in latent and rank[v] < rank[x]}
     path = find_open_path(
-        indexed.parents, indexed.children, indexed.siblings, [x], conditioned.__contains__,
-        (conditioned | reach(favourable_parents, conditioned)).__contains__, y.__eq__, cut=x, fixed=later.__contains__,
+        indexed.parents,
+        indexed.children,
+        indexed.siblings,
+        [x],
+        conditioned.__contains__,
+        (conditioned | reach(favourable_parents, conditioned)).__contains__,
+        y.__eq__,
+        cut=x,
+        fixed=later.__contains__,
     )
     return None if path is None else (path, conditioned)
 

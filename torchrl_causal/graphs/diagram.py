@@ -200,9 +200,7 @@ class CausalDiagram:
             for b in range(n):
                 for a in self._pa[b]:
                     if rank[a] > rank[b]:
-                        raise GraphError(
-                            f"order puts {self._nodes[b]!r} before its parent {self._nodes[a]!r}"
-                        )
+                        raise GraphError(f"order puts {self._nodes[b]!r} before its parent {self._nodes[a]!r}")
             return ids
         indegree = [len(p) for p in self._pa]
         heap = [i for i in range(n) if indegree[i] == 0]
@@ -293,9 +291,7 @@ class CausalDiagram:
     def bidirected_edges(self) -> tuple[tuple[Node, Node], ...]:
         """Each bidirected edge once, as ``(earlier, later)`` in topological order."""
         rank = self._rank
-        return tuple(
-            (self._nodes[a], self._nodes[b]) for b in self._order for a in self._sp[b] if rank[a] < rank[b]
-        )
+        return tuple((self._nodes[a], self._nodes[b]) for b in self._order for a in self._sp[b] if rank[a] < rank[b])
 
     def __len__(self) -> int:
         return len(self._nodes)
@@ -497,14 +493,10 @@ class CausalDiagram:
         common = x & y
         if common:
             return (self._nodes[min(common)],)
-        path = find_open_path(
-            self._pa, self._ch, self._sp, x, z.__contains__, (z | reach(self._pa, z)).__contains__, y.__contains__
-        )
+        path = find_open_path(self._pa, self._ch, self._sp, x, z.__contains__, (z | reach(self._pa, z)).__contains__, y.__contains__)
         return None if path is None else tuple(self._nodes[i] for i in path)
 
-    def is_d_separated(
-        self, xs: Node | Iterable[Node], ys: Node | Iterable[Node], zs: Node | Iterable[Node] = ()
-    ) -> bool:
+    def is_d_separated(self, xs: Node | Iterable[Node], ys: Node | Iterable[Node], zs: Node | Iterable[Node] = ()) -> bool:
         """Whether ``zs`` d-separates ``xs`` from ``ys`` (bidirected edges count as latent
         common causes). Linear in the size of the diagram: every (node, entered-through-
         arrowhead?) state is expanded once."""

@@ -36,9 +36,7 @@ class BoundedInfluenceError(GraphError):
         chain: the path in the latent projection that makes an extended parent so early.
     """
 
-    def __init__(
-        self, message: str, k: int | None = None, required_k: int | None = None, chain: Sequence[Hashable] = ()
-    ) -> None:
+    def __init__(self, message: str, k: int | None = None, required_k: int | None = None, chain: Sequence[Hashable] = ()) -> None:
         super().__init__(message)
         self.k = k
         self.required_k = required_k
@@ -74,8 +72,6 @@ class WindowConstructionError(NotImitableError):
         horizon: the horizon of the unrolled diagram the failure was found at.
     """
 
-    def __init__(
-        self, message: str, actions: Sequence[Hashable] = (), witness: Sequence[Hashable] = (), horizon: int = 0
-    ) -> None:
+    def __init__(self, message: str, actions: Sequence[Hashable] = (), witness: Sequence[Hashable] = (), horizon: int = 0) -> None:
         super().__init__(message, actions, witness)
         self.horizon = horizon

@@ -209,8 +209,14 @@ class TimeSliceTemplate:
         fields = {
             name: getattr(self, name)
             for name in (
-                "variables", "action", "observed", "directed", "bidirected",
-                "reward_parents", "reward_bidirected", "reward_slices",
+                "variables",
+                "action",
+                "observed",
+                "directed",
+                "bidirected",
+                "reward_parents",
+                "reward_bidirected",
+                "reward_slices",
             )
         }
         unknown = set(changes) - set(fields)

@@ -79,9 +79,7 @@ class AdjustmentWindow:
             raise ValueError(f"window size k must be a non-negative int, got {self.k!r}")
         for var, var_lags in self.lags.items():
             if list(var_lags) != sorted(set(var_lags)) or any(lag < 0 or lag > self.k for lag in var_lags):
-                raise ValueError(
-                    f"lags of {var!r} must be strictly increasing within 0..{self.k}, got {var_lags!r}"
-                )
+                raise ValueError(f"lags of {var!r} must be strictly increasing within 0..{self.k}, got {var_lags!r}")
             if var == self.action and 0 in var_lags:
                 raise ValueError(f"the action {var!r} cannot be conditioned on at lag 0 (it is being chosen)")
         object.__setattr__(self, "lags", {var: tuple(v) for var, v in self.lags.items()})
@@ -117,8 +115,7 @@ class AdjustmentWindow:
         state_lags = tuple(sorted({lag for var, lags in self.lags.items() if var != self.action for lag in lags}))
         action_lags = tuple(range(1, self.k + 1))
         lags = {var: action_lags if var == self.action else state_lags for var in self.observed}
-        return replace(self, lags={var: lags for var, lags in lags.items() if lags}, excluded=frozenset(),
-                       exact=False, witnesses=())
+        return replace(self, lags={var: lags for var, lags in lags.items() if lags}, excluded=frozenset(), exact=False, witnesses=())
 
     def past_only(self) -> AdjustmentWindow:
         """This window without lag 0: only steps before the current one (lags ``1..k``).
@@ -158,8 +155,13 @@ class AdjustmentWindow:
         missing = sorted(dropped - set(self.lags))
         if missing:
             raise ValueError(f"cannot drop {missing}: not in the window, whose variables are {list(self.lags)}")
-        return replace(self, lags={var: lags for var, lags in self.lags.items() if var not in dropped},
-                       excluded=self.excluded | (dropped - {self.action}), exact=False, witnesses=())
+        return replace(
+            self,
+            lags={var: lags for var, lags in self.lags.items() if var not in dropped},
+            excluded=self.excluded | (dropped - {self.action}),
+            exact=False,
+            witnesses=(),
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-serialisable description; :meth:`from_dict` inverts it exactly."""

@@ -52,8 +52,7 @@ def bounded_action_spec(action_spec: TensorSpec, action_key: NestedKey = "action
     if isinstance(action_spec, Composite):
         if action_key not in action_spec.keys(True, True):
             raise KeyError(
-                f"action key {action_key!r} not found in the composite action spec "
-                f"(keys: {list(action_spec.keys(True, True))})."
+                f"action key {action_key!r} not found in the composite action spec (keys: {list(action_spec.keys(True, True))})."
             )
         action_spec = action_spec[action_key]
     if not isinstance(action_spec, Bounded) or action_spec.dtype not in (
@@ -63,8 +62,7 @@ def bounded_action_spec(action_spec: TensorSpec, action_key: NestedKey = "action
         torch.float64,
     ):
         raise TypeError(
-            f"action {action_key!r} needs a continuous Bounded spec, got {type(action_spec).__name__}"
-            f" with dtype {action_spec.dtype}."
+            f"action {action_key!r} needs a continuous Bounded spec, got {type(action_spec).__name__} with dtype {action_spec.dtype}."
         )
     low, high = action_spec.space.low, action_spec.space.high
     if not (torch.isfinite(low).all() and torch.isfinite(high).all() and (high > low).all()):
@@ -194,15 +192,11 @@ def make_qvalue_network(
         torch.Size([3, 1])
     """
     spec = bounded_action_spec(action_spec, action_key)
-    body = ResidualMLP(
-        observation_dim + _action_dim(spec), 1, hidden=hidden, num_blocks=num_blocks, dropout=dropout
-    )
+    body = ResidualMLP(observation_dim + _action_dim(spec), 1, hidden=hidden, num_blocks=num_blocks, dropout=dropout)
     return ValueOperator(body, in_keys=[observation_key, action_key])
 
 
-def make_gail_value_network(
-    observation_dim: int, *, hidden: int = 256, observation_key: NestedKey = "observation"
-) -> ValueOperator:
+def make_gail_value_network(observation_dim: int, *, hidden: int = 256, observation_key: NestedKey = "observation") -> ValueOperator:
     """GAIL's critic: a three-layer ReLU MLP over the observation; writes ``"state_value"``.
 
     Examples:

@@ -83,8 +83,9 @@ class Standardize(nn.Module):
         (``(n, features)``, ``n >= 2``); a feature whose deviation is below ``min_scale``
         keeps scale 1, so a constant input is centred, not blown up. Returns ``self``."""
         if samples.ndim != 2 or samples.shape[-1] != self.loc.numel() or samples.shape[0] < 2:
-            raise ValueError(f"Standardize({self.loc.numel()}).fit needs (n >= 2, {self.loc.numel()}) samples, "
-                             f"got shape {tuple(samples.shape)}.")
+            raise ValueError(
+                f"Standardize({self.loc.numel()}).fit needs (n >= 2, {self.loc.numel()}) samples, got shape {tuple(samples.shape)}."
+            )
         samples = samples.to(self.loc)
         deviation = samples.std(dim=0)
         self.loc.copy_(samples.mean(dim=0))
@@ -185,8 +186,7 @@ class ResidualMLP(nn.Module):
         features = sum(t.shape[-1] for t in inputs)
         if features != self.in_features:
             raise ValueError(
-                f"ResidualMLP expects {self.in_features} input features, got {features} "
-                f"(input shapes {[tuple(t.shape) for t in inputs]})."
+                f"ResidualMLP expects {self.in_features} input features, got {features} (input shapes {[tuple(t.shape) for t in inputs]})."
             )
         collapsed = [_unbroadcast(t) for t in inputs] if len(inputs) > 1 else list(inputs)
         if any(c is not t for c, t in zip(collapsed, inputs)):

@@ -80,9 +80,7 @@ def add_absorbing_transitions(
         (False, True)
     """
     if transitions.batch_dims != 1:
-        raise ValueError(
-            f"add_absorbing_transitions expects a flat batch of transitions, got batch size {tuple(transitions.batch_size)}."
-        )
+        raise ValueError(f"add_absorbing_transitions expects a flat batch of transitions, got batch size {tuple(transitions.batch_size)}.")
     terminated = transitions.get(terminated_key, None)
     if terminated is None:
         raise KeyError(f"transitions need the terminal flag {terminated_key!r} to place absorbing states.")
@@ -138,12 +136,14 @@ class AbsorbingIndicator(TensorDictModuleBase):
         (torch.Size([2, 1]), True, torch.Size([2, 3]))
     """
 
-    def __init__(self, network: TensorDictModuleBase, *, observation_key: NestedKey = "observation",
-                 absorbing_key: NestedKey = ABSORBING_KEY) -> None:
+    def __init__(
+        self, network: TensorDictModuleBase, *, observation_key: NestedKey = "observation", absorbing_key: NestedKey = ABSORBING_KEY
+    ) -> None:
         super().__init__()
         if observation_key not in network.in_keys:
-            raise KeyError(f"AbsorbingIndicator appends the flag to {observation_key!r}, "
-                           f"which the network does not read (in_keys {network.in_keys}).")
+            raise KeyError(
+                f"AbsorbingIndicator appends the flag to {observation_key!r}, which the network does not read (in_keys {network.in_keys})."
+            )
         self.network = network
         self.observation_key = observation_key
         self.absorbing_key = absorbing_key

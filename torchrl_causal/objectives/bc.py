@@ -51,7 +51,5 @@ class HuberBCLoss(BCLoss):
     def __init__(self, actor_network: TensorDictModule, *, delta: float = 1.0, reduction: str | None = None) -> None:
         if not delta > 0:
             raise ValueError(f"delta must be positive, got {delta!r}.")
-        super().__init__(
-            actor_network, loss_function=partial(F.huber_loss, reduction="none", delta=delta), reduction=reduction
-        )
+        super().__init__(actor_network, loss_function=partial(F.huber_loss, reduction="none", delta=delta), reduction=reduction)
         self.delta = delta

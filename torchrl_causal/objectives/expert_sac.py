@@ -218,8 +218,10 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
     def behaviour_cloning_anchor(self, tensordict: TensorDictBase) -> torch.Tensor:
         """Mean squared error between the actor's deterministic action and the expert rows' actions."""
         actions, weights = self.expert_actions(tensordict)
-        with set_exploration_type(ExplorationType.DETERMINISTIC), \
-                self.actor_network_params.to_module(self.actor_network, preserve_module_state=False):
+        with (
+            set_exploration_type(ExplorationType.DETERMINISTIC),
+            self.actor_network_params.to_module(self.actor_network, preserve_module_state=False),
+        ):
             dist = self.actor_network.get_dist(tensordict.select(*self.actor_network.in_keys, strict=False))
             mode = dist.deterministic_sample
         return (weights * (mode - actions).pow(2).mean(-1, keepdim=True)).sum()

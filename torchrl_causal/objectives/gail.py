@@ -107,10 +107,15 @@ class GAILDiscriminatorLoss(InKeysHook, GAILLoss):
     default_keys = _AcceptedKeys
     tensor_keys: _AcceptedKeys
 
-    def __init__(self, discriminator_network: TensorDictModule, *, use_grad_penalty: bool = True,
-                 gp_lambda: float = 5.0, reduction: str | None = None) -> None:
-        super().__init__(discriminator_network, use_grad_penalty=use_grad_penalty, gp_lambda=gp_lambda,
-                         reduction=reduction)
+    def __init__(
+        self,
+        discriminator_network: TensorDictModule,
+        *,
+        use_grad_penalty: bool = True,
+        gp_lambda: float = 5.0,
+        reduction: str | None = None,
+    ) -> None:
+        super().__init__(discriminator_network, use_grad_penalty=use_grad_penalty, gp_lambda=gp_lambda, reduction=reduction)
 
     @property
     def absorbing(self) -> bool:
@@ -124,8 +129,7 @@ class GAILDiscriminatorLoss(InKeysHook, GAILLoss):
 
     def _logits(self, observation: torch.Tensor, action: torch.Tensor, absorbing: torch.Tensor | None) -> torch.Tensor:
         keys = self.tensor_keys
-        inputs = TensorDict({keys.expert_observation: observation, keys.expert_action: action},
-                            batch_size=observation.shape[:-1])
+        inputs = TensorDict({keys.expert_observation: observation, keys.expert_action: action}, batch_size=observation.shape[:-1])
         if absorbing is not None:
             inputs.set(ABSORBING_KEY, absorbing)
         with self.discriminator_network_params.to_module(self.discriminator_network, preserve_module_state=False):
@@ -139,11 +143,13 @@ class GAILDiscriminatorLoss(InKeysHook, GAILLoss):
         flags = None
         if self.absorbing:
             flags = (tensordict.get(keys.expert_absorbing), tensordict.get(keys.collector_absorbing))
-        logits = self._logits(torch.cat([expert_obs, policy_obs]), torch.cat([expert_act, policy_act]),
-                              None if flags is None else torch.cat(flags))
+        logits = self._logits(
+            torch.cat([expert_obs, policy_obs]), torch.cat([expert_act, policy_act]), None if flags is None else torch.cat(flags)
+        )
         expert_logits, policy_logits = logits.chunk(2, dim=0)
-        loss = (F.binary_cross_entropy_with_logits(expert_logits, torch.ones_like(expert_logits), reduction="none")
-                + F.binary_cross_entropy_with_logits(policy_logits, torch.zeros_like(policy_logits), reduction="none"))
+        loss = F.binary_cross_entropy_with_logits(
+            expert_logits, torch.ones_like(expert_logits), reduction="none"
+        ) + F.binary_cross_entropy_with_logits(policy_logits, torch.zeros_like(policy_logits), reduction="none")
         out = {}
         if self.use_grad_penalty:
             gp_loss = self.gp_lambda * self.gradient_penalty(expert_obs, expert_act, policy_obs, policy_act, flags)
@@ -152,8 +158,14 @@ class GAILDiscriminatorLoss(InKeysHook, GAILLoss):
         out["loss"] = reduce_loss(self, loss, tensordict)
         return TensorDict(out)
 
-    def gradient_penalty(self, expert_obs: torch.Tensor, expert_act: torch.Tensor, policy_obs: torch.Tensor,
-                         policy_act: torch.Tensor, flags: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
+    def gradient_penalty(
+        self,
+        expert_obs: torch.Tensor,
+        expert_act: torch.Tensor,
+        policy_obs: torch.Tensor,
+        policy_act: torch.Tensor,
+        flags: tuple[torch.Tensor, torch.Tensor] | None = None,
+    ) -> torch.Tensor:
         r""":math:`\frac1N \sum_i (\lVert \nabla_u \ell(\hat u_i) \rVert - 1)^2` on per-sample interpolates
         (without :attr:`gp_lambda`), over the pairs whose ends are not absorbing."""
         weight = torch.rand((*expert_obs.shape[:-1], 1), dtype=expert_obs.dtype, device=expert_obs.device)
@@ -397,5 +409,6 @@ def make_gail_losses(
     )
     policy_loss.make_value_estimator(ValueEstimators.GAE, gamma=gamma, lmbda=gae_lambda)
     logits_key = discriminator_loss.tensor_keys.discriminator_pred
-    return GAILLosses(discriminator_loss, policy_loss,
-                      DiscriminatorReward(discriminator, logits_key=logits_key, reward=reward, gamma=gamma))
+    return GAILLosses(
+        discriminator_loss, policy_loss, DiscriminatorReward(discriminator, logits_key=logits_key, reward=reward, gamma=gamma)
+    )

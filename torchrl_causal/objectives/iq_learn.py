@@ -153,10 +153,11 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
         if not isinstance(num_value_samples, int) or num_value_samples < 1:
             raise ValueError(f"num_value_samples must be a positive integer, got {num_value_samples!r}.")
         if variant == "iq_learn" and kwargs.get("goal_value") is not None:
-            raise ValueError("goal_value is derived for the paper's variant (SQIL with expert reward 1/p); "
-                             "variant='iq_learn' learns its implicit reward and has no such value.")
-        super().__init__(actor_network, qvalue_network, min_alpha=min_alpha, max_alpha=max_alpha,
-                         absorbing=absorbing, **kwargs)
+            raise ValueError(
+                "goal_value is derived for the paper's variant (SQIL with expert reward 1/p); "
+                "variant='iq_learn' learns its implicit reward and has no such value."
+            )
+        super().__init__(actor_network, qvalue_network, min_alpha=min_alpha, max_alpha=max_alpha, absorbing=absorbing, **kwargs)
         self.variant = variant
         self.num_value_samples = num_value_samples
 
@@ -171,9 +172,13 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
             a tensor of shape ``(num_critics, K, *batch, 1)``; it carries gradient to
             ``qvalue_params`` when they require it.
         """
-        with torch.no_grad(), eval_mode(self.actor_network), set_exploration_type(ExplorationType.RANDOM), \
-                self.actor_network_params.to_module(self.actor_network, preserve_module_state=False), \
-                set_composite_lp_aggregate(True):
+        with (
+            torch.no_grad(),
+            eval_mode(self.actor_network),
+            set_exploration_type(ExplorationType.RANDOM),
+            self.actor_network_params.to_module(self.actor_network, preserve_module_state=False),
+            set_composite_lp_aggregate(True),
+        ):
             dist = self.actor_network.get_dist(states.select(*self.actor_network.in_keys, strict=False))
             actions, log_prob = rsample_and_log_prob(dist, (self.num_value_samples,))
         samples = states.select(*self.qvalue_network.in_keys, strict=False).expand(self.num_value_samples, *states.shape)
@@ -194,8 +199,10 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
         """The chi-squared critic loss of :attr:`variant`; replaces SAC's soft Bellman regression in :meth:`forward`."""
         expert = self.expert_flag(tensordict).to(self.log_alpha.dtype)
         num_expert = expert.sum()
-        message = (f"IQLearnLoss needs at least one expert transition per batch (flag {self.tensor_keys.expert!r}); "
-                   "sample expert and policy transitions together (the paper uses half of each).")
+        message = (
+            f"IQLearnLoss needs at least one expert transition per batch (flag {self.tensor_keys.expert!r}); "
+            "sample expert and policy transitions together (the paper uses half of each)."
+        )
         if expert.device.type == "cpu" and not torch.compiler.is_compiling():
             if not num_expert:  # reading a CPU tensor costs nothing
                 raise ValueError(message)
@@ -215,9 +222,9 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
             both = torch.cat([tensordict.select(*keys, strict=False), next_states.select(*keys, strict=False)])
             state_value, next_value = self.soft_values(both, self.qvalue_network_params).mean(1).chunk(2, dim=1)
             value_term = state_value - discount * next_value
-        q = qvalues_per_critic(
-            self, tensordict.select(*self.qvalue_network.in_keys, strict=False), self.qvalue_network_params
-        ).get(self.tensor_keys.state_action_value)
+        q = qvalues_per_critic(self, tensordict.select(*self.qvalue_network.in_keys, strict=False), self.qvalue_network_params).get(
+            self.tensor_keys.state_action_value
+        )
         # The paper's critic is SQIL with expert reward 1/p (p the batch's expert fraction):
         # its goal is worth (1/p) / (1 - gamma), goal_bootstrap's value at expert reward 1.
         inverse_fraction = expert.numel() / num_expert

@@ -94,8 +94,15 @@ class Trainer(ABC):
     #: the config key holding the training budget, counted in :attr:`unit`.
     budget_key: ClassVar[str]
 
-    def __init__(self, cfg: DictConfig, run: RunDirectory, window: AdjustmentWindow,
-                 evaluate: Callable[[TensorDictModuleBase], Score], *, device: torch.device | None = None) -> None:
+    def __init__(
+        self,
+        cfg: DictConfig,
+        run: RunDirectory,
+        window: AdjustmentWindow,
+        evaluate: Callable[[TensorDictModuleBase], Score],
+        *,
+        device: torch.device | None = None,
+    ) -> None:
         self.cfg = cfg
         self.run = run
         self.window = window
@@ -180,8 +187,14 @@ class Trainer(ABC):
         torch.set_rng_state(state["torch_rng"].cpu())
 
     def write_status(self, status: str) -> None:
-        self.run.write_status(status, progress=self.progress, total=self.total, unit=self.unit,
-                              best_progress=self.best_progress, best_train_return=self.best_return)
+        self.run.write_status(
+            status,
+            progress=self.progress,
+            total=self.total,
+            unit=self.unit,
+            best_progress=self.best_progress,
+            best_train_return=self.best_return,
+        )
 
     def save_checkpoint(self) -> None:
         self.run.save_checkpoint(self.state_dict())
@@ -197,8 +210,10 @@ class Trainer(ABC):
         if state is None:
             return False
         if state["progress"] > self.total:
-            raise ConfigMismatchError(f"{self.run.path} has trained {state['progress']} {self.unit}, more than "
-                                      f"{self.budget_key}={self.total}: raise the budget or start another run")
+            raise ConfigMismatchError(
+                f"{self.run.path} has trained {state['progress']} {self.unit}, more than "
+                f"{self.budget_key}={self.total}: raise the budget or start another run"
+            )
         self.load_state_dict(state)
         _truncate_scalar_logs(self.run.log_dir, self.progress)
         return True
@@ -223,19 +238,22 @@ class Trainer(ABC):
         self.last_evaluated = self.progress
         if result.return_mean > self.best_return:
             self.best_return, self.best_progress = result.return_mean, self.progress
-            self.run.save_checkpoint({"progress": self.progress, "train_return": result.return_mean,
-                                      "policy": self.policy.state_dict()}, best=True)
+            self.run.save_checkpoint(
+                {"progress": self.progress, "train_return": result.return_mean, "policy": self.policy.state_dict()}, best=True
+            )
         self.save_checkpoint()
-        log.info("[%d %s] train-regime return %.1f, success %.0f%%", self.progress, self.unit, result.return_mean,
-                 100 * result.success_rate)
+        log.info(
+            "[%d %s] train-regime return %.1f, success %.0f%%", self.progress, self.unit, result.return_mean, 100 * result.success_rate
+        )
         return result
 
     def _interrupted(self, signal_number: int) -> RunInterrupted:
         self.save_checkpoint()
         self.write_status("interrupted")
         name = signal.Signals(signal_number).name
-        return RunInterrupted(signal_number, f"{self.run.path}: interrupted by {name} at {self.progress}/{self.total} "
-                                             f"{self.unit}, checkpoint saved")
+        return RunInterrupted(
+            signal_number, f"{self.run.path}: interrupted by {name} at {self.progress}/{self.total} {self.unit}, checkpoint saved"
+        )
 
     def fit(self) -> None:
         """Trains (or resumes) to the budget; the selected policy ends in ``best.pt``.
@@ -248,14 +266,17 @@ class Trainer(ABC):
         self.logger = instantiate(self.cfg.logger)(log_dir=str(self.run.path))
         if resumed:
             log.info("resumed %s at %d %s", self.run.path, self.progress, self.unit)
-        identity = attempt_identity(source_checksum(self.cfg.demos.source, self.cfg.demos.path), self.cfg.compile,
-                                    self.device)
+        identity = attempt_identity(source_checksum(self.cfg.demos.source, self.cfg.demos.path), self.cfg.compile, self.device)
         previous = self.run.record_attempt(identity, self.progress)
         changes = identity_changes(previous, identity) if resumed and previous is not None else {}
         if changes:
             listed = "; ".join(f"{key}: {old!r} -> {new!r}" for key, (old, new) in changes.items())
-            log.warning("%s resumes under other code, data or runtime than its last attempt (%s): its results mix both, "
-                        "and a rerun from scratch will not repeat them", self.run.path, listed)
+            log.warning(
+                "%s resumes under other code, data or runtime than its last attempt (%s): its results mix both, "
+                "and a rerun from scratch will not repeat them",
+                self.run.path,
+                listed,
+            )
         self.write_status("running")
         label = f"{self.cfg.algo.name}{' (causal)' if self.cfg.causal else ''} seed {self.cfg.seed}"
         try:
@@ -266,8 +287,10 @@ class Trainer(ABC):
 
     def _loop(self, label: str) -> None:
         every = self.cfg.algo.eval_every
-        with progress(self.total, label, self.unit, enabled=self.cfg.progress_bar, initial=self.progress) as bar, \
-                deferred_signals() as signals:
+        with (
+            progress(self.total, label, self.unit, enabled=self.cfg.progress_bar, initial=self.progress) as bar,
+            deferred_signals() as signals,
+        ):
             while self.progress < self.total and not self.stopped:
                 before = self.progress
                 scalars = self.train_step()

@@ -79,7 +79,7 @@ class BCTrainer(Trainer):
         size = self.cfg.algo.batch_size
         order = torch.randperm(data.numel(), generator=self.generator) if shuffle else torch.arange(data.numel())
         for start in range(0, data.numel(), size):
-            yield data[order[start:start + size]]
+            yield data[order[start : start + size]]
 
     @torch.no_grad()
     def validation_loss(self) -> float:

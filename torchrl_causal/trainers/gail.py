@@ -66,20 +66,27 @@ class GAILTrainer(Trainer):
         dim, spec = observation_dim(self.env), self.env.action_spec
         # With absorbing states the discriminator also reads the absorbing flag as one more feature.
         self.losses = instantiate_with_strings(algo.loss)(
-            make_policy(self.cfg, self.env).to(self.device), instantiate(algo.value)(dim).to(self.device),
-            instantiate(algo.discriminator)(dim + int(algo.loss.absorbing), spec).to(self.device))
+            make_policy(self.cfg, self.env).to(self.device),
+            instantiate(algo.value)(dim).to(self.device),
+            instantiate(algo.discriminator)(dim + int(algo.loss.absorbing), spec).to(self.device),
+        )
         ppo = self.losses.policy
         self.actor_optimizer = instantiate(algo.actor_optimizer)(list(ppo.actor_network_params.flatten_keys().values()))
-        self.critic_optimizer = instantiate(algo.critic_optimizer)(
-            list(ppo.critic_network_params.flatten_keys().values()))
+        self.critic_optimizer = instantiate(algo.critic_optimizer)(list(ppo.critic_network_params.flatten_keys().values()))
         self.discriminator_optimizer = instantiate(algo.discriminator_optimizer)(self.losses.discriminator.parameters())
         self.discriminator_schedule = instantiate(algo.discriminator_scheduler)(self.discriminator_optimizer)
-        self.expert = self.discriminator_rows(
-            expert_transitions(self.window, load_or_collect_demonstrations(self.cfg))).to(self.device)
+        self.expert = self.discriminator_rows(expert_transitions(self.window, load_or_collect_demonstrations(self.cfg))).to(self.device)
         self.generator = torch.Generator().manual_seed(self.cfg.seed)
-        self.collector = ResumableCollector(self.env, self.policy, frames_per_batch=algo.episodes_per_round * self.cfg.env.horizon,
-                                            total_frames=-1, env_device=CPU, policy_device=self.device,
-                                            storing_device=self.device, auto_register_policy_transforms=False)
+        self.collector = ResumableCollector(
+            self.env,
+            self.policy,
+            frames_per_batch=algo.episodes_per_round * self.cfg.env.horizon,
+            total_frames=-1,
+            env_device=CPU,
+            policy_device=self.device,
+            storing_device=self.device,
+            auto_register_policy_transforms=False,
+        )
         self.rollouts = iter(self.collector)
 
     def discriminator_rows(self, transitions: TensorDictBase) -> TensorDictBase:
@@ -100,7 +107,7 @@ class GAILTrainer(Trainer):
         for _ in range(epochs):
             order = torch.randperm(rows.numel(), generator=self.generator)
             for start in range(0, rows.numel(), batch_size):
-                yield rows[order[start:start + batch_size]]
+                yield rows[order[start : start + batch_size]]
 
     def _update_discriminator(self, policy_rows: TensorDictBase) -> torch.Tensor:
         """``discriminator_epochs`` passes over ``policy_rows``; returns the mean loss."""
@@ -139,8 +146,10 @@ class GAILTrainer(Trainer):
     def train_step(self) -> Mapping[str, torch.Tensor]:
         rollout = next(self.rollouts)  # [episodes_per_round, horizon], time last
         policy_rows = self.discriminator_rows(rollout.reshape(-1).select(*TRANSITION_KEYS))
-        scalars = {"train/env_reward_per_step": rollout["next", "reward"].mean(),
-                   "train/loss_discriminator": self._update_discriminator(policy_rows)}
+        scalars = {
+            "train/env_reward_per_step": rollout["next", "reward"].mean(),
+            "train/loss_discriminator": self._update_discriminator(policy_rows),
+        }
         with torch.no_grad():
             rollout = self.losses.reward(rollout)
             rollout = self.losses.policy.value_estimator(rollout)

@@ -120,8 +120,9 @@ class OffPolicyILTrainer(Trainer):
         dim, spec = observation_dim(self.env), self.env.action_spec
         # Built on the device before the loss copies them (twin and target critics, alpha).
         # With absorbing states the critic also reads the absorbing flag as one more feature.
-        loss = instantiate_with_strings(algo.loss)(make_policy(self.cfg, self.env).to(self.device),
-                                      instantiate(algo.critic)(dim + int(algo.loss.absorbing), spec).to(self.device))
+        loss = instantiate_with_strings(algo.loss)(
+            make_policy(self.cfg, self.env).to(self.device), instantiate(algo.critic)(dim + int(algo.loss.absorbing), spec).to(self.device)
+        )
         loss.make_value_estimator(**algo.value_estimator)
         return loss.to(self.device)
 
@@ -137,23 +138,29 @@ class OffPolicyILTrainer(Trainer):
         self.loss = self._make_loss()
         cosine_updates = self.schedule_span()
         self.update = ActorCriticUpdate(
-            self.loss, actor_optimizer=instantiate(algo.actor_optimizer),
-            critic_optimizer=instantiate(algo.critic_optimizer), alpha_optimizer=instantiate(algo.alpha_optimizer),
-            target_update=instantiate(algo.target_update), max_grad_norm=algo.max_grad_norm,
+            self.loss,
+            actor_optimizer=instantiate(algo.actor_optimizer),
+            critic_optimizer=instantiate(algo.critic_optimizer),
+            alpha_optimizer=instantiate(algo.alpha_optimizer),
+            target_update=instantiate(algo.target_update),
+            max_grad_norm=algo.max_grad_norm,
             critic_scheduler=None if algo.critic_scheduler is None else instantiate(algo.critic_scheduler),
-            cosine_updates=cosine_updates, compile=self.cfg.compile,
+            cosine_updates=cosine_updates,
+            compile=self.cfg.compile,
         )
         expert_batch = round(algo.batch_size * algo.expert_ratio)
         if not 1 <= expert_batch < algo.batch_size:
-            raise ValueError(f"algo.batch_size={algo.batch_size} x algo.expert_ratio={algo.expert_ratio} leaves an "
-                             "empty expert or policy half")
+            raise ValueError(
+                f"algo.batch_size={algo.batch_size} x algo.expert_ratio={algo.expert_ratio} leaves an empty expert or policy half"
+            )
         demos = self._replay_format(expert_transitions(self.window, load_or_collect_demonstrations(self.cfg)))
-        self.expert_buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(demos.numel(), device=self.device),
-                                                    batch_size=expert_batch)
+        self.expert_buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(demos.numel(), device=self.device), batch_size=expert_batch)
         self.expert_buffer.extend(demos)
         self.policy_buffer = TensorDictReplayBuffer(
             storage=LazyMemmapStorage(algo.buffer_size, scratch_dir=self.run.replay_dir / "storage", existsok=True),
-            batch_size=algo.batch_size - expert_batch, transform=operator.methodcaller("to", self.device))
+            batch_size=algo.batch_size - expert_batch,
+            transform=operator.methodcaller("to", self.device),
+        )
         self.log_every = self.cfg.log_every
         self._reset_scalar_sums()
         # One worker: built now, so that resume can load the episodes in flight into it.
@@ -175,17 +182,29 @@ class OffPolicyILTrainer(Trainer):
         devices = dict(env_device=CPU, policy_device=self.device, storing_device=self.device)
         with eval_mode(self.policy):  # the collector probes the policy when it is built
             if self.workers == 1:
-                return ResumableCollector(self.env, self.policy, frames_per_batch=frames, total_frames=-1,
-                                          init_random_frames=remaining_random or None,
-                                          auto_register_policy_transforms=False, **devices)
+                return ResumableCollector(
+                    self.env,
+                    self.policy,
+                    frames_per_batch=frames,
+                    total_frames=-1,
+                    init_random_frames=remaining_random or None,
+                    auto_register_policy_transforms=False,
+                    **devices,
+                )
             # The workers' envs are new processes: their episodes start afresh, seeded by the progress.
             seed = self.cfg.seed * 1_000_003 + self.progress
-            make_worker_env = partial(make_imitator_env, self.cfg, self.window, "train",
-                                      algo.num_envs // self.workers, seed)
+            make_worker_env = partial(make_imitator_env, self.cfg, self.window, "train", algo.num_envs // self.workers, seed)
             # Every worker counts its own random frames, so each takes its share of them.
-            collector = MultiSyncCollector([make_worker_env] * self.workers, self.policy, frames_per_batch=frames,
-                                           total_frames=-1, init_random_frames=remaining_random // self.workers or None,
-                                           cat_results="stack", auto_register_policy_transforms=False, **devices)
+            collector = MultiSyncCollector(
+                [make_worker_env] * self.workers,
+                self.policy,
+                frames_per_batch=frames,
+                total_frames=-1,
+                init_random_frames=remaining_random // self.workers or None,
+                cat_results="stack",
+                auto_register_policy_transforms=False,
+                **devices,
+            )
             collector.set_seed(seed)
             return collector
 
@@ -293,8 +312,12 @@ class OffPolicyILTrainer(Trainer):
             if len(self.policy_buffer) != state["policy_buffer_len"]:
                 # The run was killed between saving the buffer and the checkpoint: the
                 # buffer holds a few more (valid) transitions than the checkpoint counted.
-                log.warning("the replay buffer in %s holds %d transitions, the checkpoint counted %d; continuing",
-                            self.run.replay_dir, len(self.policy_buffer), state["policy_buffer_len"])
+                log.warning(
+                    "the replay buffer in %s holds %d transitions, the checkpoint counted %d; continuing",
+                    self.run.replay_dir,
+                    len(self.policy_buffer),
+                    state["policy_buffer_len"],
+                )
         if self.workers == 1:
             self.collector.load_state_dict(state["collector"])
         self.scalar_sums = state["scalar_sums"].to(self.device)

@@ -128,8 +128,7 @@ class ActorCriticUpdate:
         if critic_scheduler is not None and (cosine_updates is None or cosine_updates < 1):
             raise ValueError(f"a critic_scheduler needs cosine_updates >= 1, got {cosine_updates}")
         self.cosine_updates = cosine_updates
-        self.critic_schedule = (None if critic_scheduler is None
-                                else critic_scheduler(self.critic_optimizer, T_max=cosine_updates))
+        self.critic_schedule = None if critic_scheduler is None else critic_scheduler(self.critic_optimizer, T_max=cosine_updates)
         self.updates = 0
         if compile:
             # Static shapes: a training run feeds one batch size, and a second compiled update

@@ -244,8 +244,7 @@ class CausalWindowTransform(Transform):
         if self._layout is None:
             if self.parent is None:
                 raise RuntimeError(
-                    "the variable shapes are unknown: attach the transform to an env, encode data "
-                    "first, or pass shapes explicitly"
+                    "the variable shapes are unknown: attach the transform to an env, encode data first, or pass shapes explicitly"
                 )
             self._leaf_specs(self.parent.full_observation_spec, self.parent.full_action_spec)
         return self._layout
@@ -300,9 +299,7 @@ class CausalWindowTransform(Transform):
         else:
             for var, b in bounds.items():
                 if b is None:
-                    infinite = torch.full(
-                        (*batch, layout.widths[var]), torch.inf, dtype=dtype, device=observation_spec.device
-                    )
+                    infinite = torch.full((*batch, layout.widths[var]), torch.inf, dtype=dtype, device=observation_spec.device)
                     bounds[var] = (-infinite, infinite)
             low, high = layout.bounds(bounds)
             encoding_spec = Bounded(low=low, high=high, shape=shape, dtype=dtype, device=observation_spec.device)
@@ -427,9 +424,7 @@ class CausalWindowTransform(Transform):
             "a replay buffer use the transform and sample unit of make_rb_transform_and_sample_unit()"
         )
 
-    def make_rb_transform_and_sample_unit(
-        self, *, traj_key: NestedKey | None = None
-    ) -> tuple[EpisodeWindowEncoder, EpisodeHistory]:
+    def make_rb_transform_and_sample_unit(self, *, traj_key: NestedKey | None = None) -> tuple[EpisodeWindowEncoder, EpisodeHistory]:
         """A replay-buffer transform and sample unit that encode each sampled step correctly.
 
         Store raw transitions (the admissible keys, ``action_key``, ``"is_init"`` and
@@ -467,8 +462,7 @@ class CausalWindowTransform(Transform):
         """
         return EpisodeWindowEncoder(self), EpisodeHistory(self.window.k, traj_key=traj_key)
 
-    def encode_trajectories(self, trajectories: TensorDictBase, *,
-                            keys: Sequence[NestedKey] | None = None) -> TensorDictBase:
+    def encode_trajectories(self, trajectories: TensorDictBase, *, keys: Sequence[NestedKey] | None = None) -> TensorDictBase:
         """Encodes stored, time-ordered transitions exactly as the online transform would.
 
         Args:
@@ -624,10 +618,7 @@ class CausalWindowTransform(Transform):
 
     def __repr__(self) -> str:
         lags = ", ".join(f"{var}@{list(lags)}" for var, lags in self.window.lags.items())
-        return (
-            f"{type(self).__name__}(k={self.window.k}, lags=[{lags}], hidden={list(self.hidden_keys)}, "
-            f"out_key={self.out_key!r})"
-        )
+        return f"{type(self).__name__}(k={self.window.k}, lags=[{lags}], hidden={list(self.hidden_keys)}, out_key={self.out_key!r})"
 
 
 def step_keys(env: EnvBase) -> list[NestedKey]:
@@ -690,8 +681,7 @@ def causal_template(env: EnvBase) -> TimeSliceTemplate:
     for index, template in enumerate(templates[1:], 1):
         if template != templates[0]:
             raise ValueError(
-                f"sub-env {index} of {type(env).__name__} has another causal template than sub-env 0: "
-                f"{template} != {templates[0]}"
+                f"sub-env {index} of {type(env).__name__} has another causal template than sub-env 0: {template} != {templates[0]}"
             )
     return templates[0]
 
