@@ -377,6 +377,26 @@ def test_overrides_reach_env_window_and_run_dir() -> None:
         make_window(compose_config(["window.drop=[compass]"]))
 
 
+@pytest.mark.parametrize("env", sorted(ENVS))
+@pytest.mark.parametrize("causal", [True, False])
+def test_the_run_window_comes_from_the_env_class_without_building_an_env(env: str, causal: bool, monkeypatch) -> None:
+    """``make_window`` reads the class's template; the window equals the one built from a live
+    env (the transform's own route), and no env is constructed on the way."""
+    from torchrl_causal.experiment import builders
+    from torchrl_causal.transforms import CausalWindowTransform
+
+    cfg = compose_config([f"env={env}", f"causal={str(causal).lower()}"])
+    live = builders.make_env(cfg, "train", 1, 0)
+    expected = CausalWindowTransform.from_env(live, cfg.window.k, causal=causal).window
+    live.close()
+
+    def no_env(*args: Any, **kwargs: Any) -> None:
+        raise AssertionError("make_window built an env")
+
+    monkeypatch.setattr(builders, "make_env", no_env)
+    assert builders.make_window(cfg) == expected
+
+
 @pytest.mark.parametrize(
     ("experiment", "swept"),
     [

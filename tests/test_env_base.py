@@ -17,7 +17,7 @@ from torchrl_causal.envs import CompassSensor, GustConfoundedEnv, GustProcess, r
 class DriftEnv(GustConfoundedEnv):
     """A minimal gust env: a point that drifts by the action, succeeds beyond radius 3."""
 
-    causal_template = None  # the base never reads it
+    slice_template = None  # the base never reads it
 
     def _make_variable_specs(self):
         batch = self.batch_size

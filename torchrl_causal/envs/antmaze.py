@@ -113,8 +113,8 @@ class AntMazeEnv(MujocoMazeEnv):
     def _edit_spec(cls, spec: mujoco.MjSpec) -> None:
         ogbench_ant_physics(spec)
 
-    @property
-    def causal_template(self) -> TimeSliceTemplate:
+    @classmethod
+    def slice_template(cls) -> TimeSliceTemplate:
         """The paper's slice graph (:data:`~torchrl_causal.envs.templates.ANTMAZE_TEMPLATE`)."""
         return ANTMAZE_TEMPLATE
 

@@ -274,10 +274,19 @@ class ConfoundedEnv(EnvBase):
         """Number of steps after which an episode is truncated."""
         return self._horizon
 
-    @property
+    @classmethod
     @abstractmethod
+    def slice_template(cls) -> TimeSliceTemplate:
+        """The time-slice template whose edges this class's mechanism makes true.
+
+        A class-level fact (the mechanism's edges do not depend on the constructor's
+        arguments), so a run computes its adjustment window from it without building an env
+        (:func:`~torchrl_causal.experiment.builders.make_window`)."""
+
+    @property
     def causal_template(self) -> TimeSliceTemplate:
-        """The time-slice template whose edges this env's mechanism makes true."""
+        """This env's template: :meth:`slice_template` of its class."""
+        return self.slice_template()
 
     def config(self) -> dict[str, object]:
         """JSON-serialisable constructor arguments (recorded with demonstrations)."""

@@ -101,8 +101,8 @@ class HumanoidMazeEnv(MujocoMazeEnv):
     qpos_noise: ClassVar[float] = START_QPOS_NOISE
     qvel_noise_std: ClassVar[float] = START_QVEL_NOISE
 
-    @property
-    def causal_template(self) -> TimeSliceTemplate:
+    @classmethod
+    def slice_template(cls) -> TimeSliceTemplate:
         """The paper's slice graph (:data:`~torchrl_causal.envs.templates.HUMANOIDMAZE_TEMPLATE`)."""
         return HUMANOIDMAZE_TEMPLATE
 

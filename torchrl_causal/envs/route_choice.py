@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from fractions import Fraction
-from functools import cached_property
+from functools import cache
 from itertools import product
 from numbers import Rational, Real
 from typing import TYPE_CHECKING
@@ -125,8 +125,9 @@ class RouteChoiceEnv(ConfoundedEnv):
             return TRAIN_WIND
         return TRAIN_WIND + (DEPLOY_WIND - TRAIN_WIND) * _as_fraction(self.confounding_strength)
 
-    @cached_property
-    def causal_template(self) -> TimeSliceTemplate:
+    @classmethod
+    @cache
+    def slice_template(cls) -> TimeSliceTemplate:
         """Z → X ← O → W; Y has parents Z, X and shares the wind with W (W ↔ Y)."""
         from torchrl_causal.graphs import TimeSliceTemplate
 

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from functools import cached_property
+from functools import cache
 from typing import TYPE_CHECKING
 
 import torch
@@ -174,8 +174,9 @@ class RoverMazeEnv(GustConfoundedEnv):
         self.start_position = self.layout.cell_center(torch.tensor(self.start_cell)).to(self.device)
         self.goal_position = self.layout.cell_center(torch.tensor(self.goal_cell)).to(self.device)
 
-    @cached_property
-    def causal_template(self) -> TimeSliceTemplate:
+    @classmethod
+    @cache
+    def slice_template(cls) -> TimeSliceTemplate:
         """The rover's time slice: every edge is made true by :func:`rover_dynamics` or the env.
 
         Directed ``(src, dst, lag)``: the heading and speed persist and respond to the
@@ -189,7 +190,7 @@ class RoverMazeEnv(GustConfoundedEnv):
         """
         from torchrl_causal.graphs import TimeSliceTemplate
 
-        period = self.gust_process.period
+        period = cls.gust_process.period
         directed = (
             ("O", "O", 1),
             ("X", "O", 1),  # heading = previous heading + turn

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from hydra.utils import instantiate
+from hydra.utils import get_object, instantiate
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModuleBase
@@ -23,12 +23,14 @@ from torchrl.envs import EnvBase, Transform, TransformedEnv
 
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.experiment.schema import ConfigValueError, WindowMode
-from torchrl_causal.transforms import CausalWindowTransform
+from torchrl_causal.graphs.template import TimeSliceTemplate
+from torchrl_causal.transforms import CausalWindowTransform, causal_template, imitator_window
 
 __all__ = [
     "RelaxedBinaryAction",
     "instantiate_with_strings",
     "make_env",
+    "env_template",
     "make_window",
     "make_imitator_env",
     "make_policy",
@@ -104,19 +106,40 @@ def make_env(cfg: DictConfig, regime: str, batch_size: int, seed: int) -> EnvBas
     )
 
 
-def make_window(cfg: DictConfig) -> AdjustmentWindow:
-    """The adjustment window the imitator conditions on (``cfg.causal``, ``cfg.window``)."""
+def env_template(cfg: DictConfig) -> TimeSliceTemplate:
+    """The causal template of ``cfg.env``'s env, read from its class when the class has
+    ``slice_template`` (every :class:`~torchrl_causal.envs.ConfoundedEnv`: no env is built,
+    where a MuJoCo maze takes up to 0.2 s to build); an env factory of another kind is built
+    once and asked for ``causal_template``."""
+    made = get_object(cfg.env.make._target_)
+    if isinstance(made, type) and callable(getattr(made, "slice_template", None)):
+        return made.slice_template()
     env = make_env(cfg, "train", 1, cfg.seed)
     try:
-        window = CausalWindowTransform.from_env(
-            env, cfg.window.k, causal=cfg.causal, mode=WindowMode(cfg.window.mode).value, window_matched=cfg.window.window_matched
-        ).window
-        try:
-            return window.without(cfg.window.drop)
-        except ValueError as error:
-            raise ConfigValueError(f"window.drop={list(cfg.window.drop)}: {error}") from None
+        return causal_template(env)
     finally:
         env.close()
+
+
+def make_window(cfg: DictConfig) -> AdjustmentWindow:
+    """The adjustment window the imitator conditions on (``cfg.causal``, ``cfg.window``),
+    computed once per run from the env's template and handed to everything that encodes
+    its inputs (collector and evaluation envs, demonstrations).
+
+    Examples:
+        >>> from omegaconf import OmegaConf
+        >>> cfg = OmegaConf.create({"env": {"make": {"_target_": "torchrl_causal.envs.RouteChoiceEnv"}}, "causal": True,
+        ...                         "window": {"k": 0, "mode": "relaxed", "window_matched": False, "drop": []}})
+        >>> make_window(cfg).lags
+        {'Z': (0,)}
+    """
+    window = imitator_window(
+        env_template(cfg), cfg.window.k, causal=cfg.causal, mode=WindowMode(cfg.window.mode).value, window_matched=cfg.window.window_matched
+    )
+    try:
+        return window.without(cfg.window.drop)
+    except ValueError as error:
+        raise ConfigValueError(f"window.drop={list(cfg.window.drop)}: {error}") from None
 
 
 def _needs_relaxation(env: EnvBase) -> bool:

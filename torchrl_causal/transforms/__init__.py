@@ -9,7 +9,7 @@ replay buffers of raw transitions (:class:`EpisodeHistory` and
 """
 
 from torchrl_causal.transforms._layout import FeatureSlice
-from torchrl_causal.transforms.causal_window import CausalWindowTransform, causal_template, step_keys
+from torchrl_causal.transforms.causal_window import CausalWindowTransform, causal_template, imitator_window, step_keys
 from torchrl_causal.transforms.replay import EpisodeHistory, EpisodeWindowEncoder
 
-__all__ = ["CausalWindowTransform", "EpisodeHistory", "EpisodeWindowEncoder", "FeatureSlice", "causal_template", "step_keys"]
+__all__ = ["CausalWindowTransform", "EpisodeHistory", "EpisodeWindowEncoder", "FeatureSlice", "causal_template", "imitator_window", "step_keys"]

@@ -19,7 +19,7 @@ from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.transforms._layout import FeatureSlice, LagRing, WindowLayout, spec_bounds
 from torchrl_causal.transforms.replay import EpisodeHistory, EpisodeWindowEncoder
 
-__all__ = ["CausalWindowTransform", "causal_template", "step_keys"]
+__all__ = ["CausalWindowTransform", "causal_template", "imitator_window", "step_keys"]
 
 #: Sub-tensordicts of a confounded env that no imitator may see: the variables latent to
 #: the imitator, and the structural causal model's own (the confounder U).
@@ -198,17 +198,7 @@ class CausalWindowTransform(Transform):
                 ``k`` only gets validated.
             **kwargs: forwarded to the constructor.
         """
-        if isinstance(k, bool) or not isinstance(k, int) or k < 0:
-            raise ValueError(f"window size k must be a non-negative int, got {k!r}")
-        template = causal_template(env)
-        from torchrl_causal.graphs import observation_window, windowed_adjustment
-
-        if causal:
-            if window_matched:
-                raise ValueError("window_matched=True only applies to the non-causal baseline (causal=False)")
-            window = windowed_adjustment(template, k, mode=mode)
-        else:
-            window = observation_window(template, k if window_matched else None)
+        window = imitator_window(causal_template(env), k, causal=causal, mode=mode, window_matched=window_matched)
         return cls(window, **kwargs)
 
     @classmethod
@@ -643,6 +633,41 @@ def step_keys(env: EnvBase) -> list[NestedKey]:
     root = [*observations, *env.full_action_spec.keys(True, True), *done]
     following = [*observations, *env.full_reward_spec.keys(True, True), *done]
     return [unravel_key(key) for key in root] + [unravel_key(("next", key)) for key in following]
+
+
+def imitator_window(
+    template: TimeSliceTemplate,
+    k: int,
+    *,
+    causal: bool = True,
+    mode: str = "relaxed",
+    window_matched: bool = False,
+) -> AdjustmentWindow:
+    """The window an imitator conditions on, from a template alone (no env built).
+
+    ``causal=True`` is the paper's windowed sequential π-backdoor adjustment
+    (:func:`~torchrl_causal.graphs.windowed_adjustment`, Algorithm 1); ``causal=False`` the
+    non-causal baseline, every observed variable (W included) at lag 0 and the previous
+    action, or over the causal window's lags with ``window_matched``
+    (:func:`~torchrl_causal.graphs.observation_window`). The arguments are those of
+    :meth:`CausalWindowTransform.from_env`.
+
+    Examples:
+        >>> from torchrl_causal.envs import RouteChoiceEnv
+        >>> imitator_window(RouteChoiceEnv.slice_template(), 0).lags  # Z is safe, W is not
+        {'Z': (0,)}
+        >>> sorted(imitator_window(RouteChoiceEnv.slice_template(), 0, causal=False).lags)  # and the previous action
+        ['W', 'X', 'Z']
+    """
+    if isinstance(k, bool) or not isinstance(k, int) or k < 0:
+        raise ValueError(f"window size k must be a non-negative int, got {k!r}")
+    from torchrl_causal.graphs import observation_window, windowed_adjustment
+
+    if causal:
+        if window_matched:
+            raise ValueError("window_matched=True only applies to the non-causal baseline (causal=False)")
+        return windowed_adjustment(template, k, mode=mode)
+    return observation_window(template, k if window_matched else None)
 
 
 def causal_template(env: EnvBase) -> TimeSliceTemplate:
