@@ -12,4 +12,12 @@ from torchrl_causal.transforms._layout import FeatureSlice
 from torchrl_causal.transforms.causal_window import CausalWindowTransform, causal_template, imitator_window, step_keys
 from torchrl_causal.transforms.replay import EpisodeHistory, EpisodeWindowEncoder
 
-__all__ = ["CausalWindowTransform", "EpisodeHistory", "EpisodeWindowEncoder", "FeatureSlice", "causal_template", "imitator_window", "step_keys"]
+__all__ = [
+    "CausalWindowTransform",
+    "EpisodeHistory",
+    "EpisodeWindowEncoder",
+    "FeatureSlice",
+    "causal_template",
+    "imitator_window",
+    "step_keys",
+]
