@@ -39,7 +39,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import torch
 from tensordict.nn import NormalParamExtractor, TensorDictModule
@@ -233,6 +233,16 @@ def evaluate_locomotion(
     }
 
 
+class _Counters(TypedDict):
+    """Where training stands, checkpointed with the learner."""
+
+    steps: int
+    updates: int
+    update_debt: float  # updates owed, fractional while updates_per_step is not an integer
+    best_speed: float
+    collect_seed: int
+
+
 class _Progress:
     """A tqdm bar on a terminal, else a plain line every ``every`` steps (logs stay readable)."""
 
@@ -310,7 +320,7 @@ def train_locomotion(
         "alpha": torch.optim.Adam([loss.log_alpha], lr=config.lr),
     }
     buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(config.buffer_size), batch_size=config.batch_size)
-    counters = {"steps": 0, "updates": 0, "update_debt": 0.0, "best_speed": -math.inf, "collect_seed": config.seed}
+    counters: _Counters = {"steps": 0, "updates": 0, "update_debt": 0.0, "best_speed": -math.inf, "collect_seed": config.seed}
 
     def load_learner(state: dict[str, Any]) -> None:
         loss.load_state_dict(state["loss"])

@@ -71,7 +71,8 @@ class MazeLayout:
     @property
     def shape(self) -> tuple[int, int]:
         """``(rows, cols)`` of the map."""
-        return tuple(self.walls.shape)
+        rows, cols = self.walls.shape
+        return rows, cols
 
     def is_free_cell(self, cell: Sequence[int]) -> bool:
         row, col = cell

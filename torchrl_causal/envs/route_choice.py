@@ -18,7 +18,7 @@ from collections.abc import Callable
 from fractions import Fraction
 from functools import cache
 from itertools import product
-from numbers import Rational, Real
+from numbers import Rational
 from typing import TYPE_CHECKING
 
 import torch
@@ -37,7 +37,10 @@ SHELTERED_SUCCESS = Fraction(3, 4)  # P(Y = 1 | A = 1, u) for every u
 TRAIN_WIND = Fraction(1, 4)  # p_tr
 DEPLOY_WIND = Fraction(3, 4)  # p_te, reached at confounding_strength = 1
 
-RouteChoicePolicy = Callable[[int, int, int], Real]
+#: A probability given exactly (an int or a Fraction) or as a float (type checkers take an
+#: int for a float; ``numbers.Real`` is not a type they check).
+Probability = float | Fraction
+RouteChoicePolicy = Callable[[int, int, int], Probability]
 
 
 def _success_probability(route: int, wind: int) -> Fraction:
@@ -49,7 +52,7 @@ def _bernoulli(p: Fraction, value: int) -> Fraction:
     return p if value == 1 else 1 - p
 
 
-def _as_fraction(value: Real) -> Fraction:
+def _as_fraction(value: Probability) -> Fraction:
     # Floats such as 3/5 are not exact in binary; a bounded denominator recovers the
     # intended rational while leaving exact inputs (ints, Fractions) untouched.
     if isinstance(value, Rational):
@@ -57,7 +60,7 @@ def _as_fraction(value: Real) -> Fraction:
     return Fraction(float(value)).limit_denominator(10**6)
 
 
-def route_choice_value(policy: RouteChoicePolicy, wind_probability: Real) -> Fraction:
+def route_choice_value(policy: RouteChoicePolicy, wind_probability: Probability) -> Fraction:
     """``E[Y | do(policy)]`` by exhaustive enumeration over ``(Z, O, U)``.
 
     Args:

@@ -24,7 +24,7 @@ ANTMAZE_TEMPLATE = TimeSliceTemplate(
     variables=("P", "O", "A", "L", "T", "J", "W", "X"),
     action="X",
     observed=("P", "A", "L", "T", "J", "W", "X"),
-    directed=[
+    directed=(
         ("J", "A", 0),
         ("J", "T", 0),
         ("J", "L", 0),
@@ -37,8 +37,8 @@ ANTMAZE_TEMPLATE = TimeSliceTemplate(
         *[(v, "X", 0) for v in "PLTOJA"],
         ("X", "J", 1),
         *_persistence("POALTJX"),
-    ],
-    bidirected=[("W", "L", 0)],
+    ),
+    bidirected=(("W", "L", 0),),
     reward_parents=("P",),
     reward_bidirected=("W", "L"),
     reward_slices="all",
@@ -51,7 +51,7 @@ HUMANOIDMAZE_TEMPLATE = TimeSliceTemplate(
     variables=("P", "A", "H", "E", "V", "C", "J", "W", "X"),
     action="X",
     observed=("P", "A", "H", "E", "V", "J", "W", "X"),
-    directed=[
+    directed=(
         ("J", "A", 0),
         ("J", "C", 0),
         ("A", "V", 0),
@@ -65,8 +65,8 @@ HUMANOIDMAZE_TEMPLATE = TimeSliceTemplate(
         *[(v, "X", 0) for v in "PAHEVCJ"],
         ("X", "J", 1),
         *_persistence("PAHEVCJX"),
-    ],
-    bidirected=[("W", "C", 0)],
+    ),
+    bidirected=(("W", "C", 0),),
     reward_parents=("P",),
     reward_bidirected=("W", "C"),
     reward_slices="all",

@@ -112,8 +112,9 @@ def env_template(cfg: DictConfig) -> TimeSliceTemplate:
     where a MuJoCo maze takes up to 0.2 s to build); an env factory of another kind is built
     once and asked for ``causal_template``."""
     made = get_object(cfg.env.make._target_)
-    if isinstance(made, type) and callable(getattr(made, "slice_template", None)):
-        return made.slice_template()
+    slice_template = getattr(made, "slice_template", None) if isinstance(made, type) else None
+    if callable(slice_template):
+        return slice_template()
     env = make_env(cfg, "train", 1, cfg.seed)
     try:
         return causal_template(env)

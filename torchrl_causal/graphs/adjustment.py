@@ -32,7 +32,7 @@ from collections.abc import Hashable, Iterable, Iterator
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from itertools import combinations
-from typing import Literal
+from typing import Literal, cast
 
 from .criteria import BackdoorReport, ExactAdjustment, find_adjustment, sequential_pi_backdoor
 from .diagram import CausalDiagram
@@ -432,7 +432,9 @@ def windowed_adjustment(template: TimeSliceTemplate, k: int, mode: Literal["exac
             required_k=influence.required_k,
             chain=influence.chain,
         )
-    built = _window(template, {v for x in proxy.actions for v, _ in proxy.adjustment_set(x)}, k, exact=True)  # type: ignore[misc]
+    # The nodes of an unrolled template other than the reward are (variable, time) pairs.
+    chosen = {v for x in proxy.actions for v, _ in cast("frozenset[tuple[str, int]]", proxy.adjustment_set(x))}
+    built = _window(template, chosen, k, exact=True)
     failures = _window_failures(template, built, stop_at_first=True)
     if not failures:
         return built

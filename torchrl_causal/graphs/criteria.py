@@ -12,6 +12,7 @@ from bisect import bisect_left
 from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import cast
 
 from .diagram import CausalDiagram
 from .errors import GraphError, NotImitableError
@@ -59,7 +60,8 @@ def _temporal(diagram: CausalDiagram, actions: Node | Iterable[Node], reward: No
     g = diagram.indexed
     y = g.id(reward)
     single = actions in diagram
-    listed = [g.id(actions)] if single else [g.id(v) for v in actions]  # type: ignore[union-attr]
+    # One node of the diagram, or else the iterable of them that the signature allows.
+    listed = [g.id(cast(Node, actions))] if single else [g.id(v) for v in cast(Iterable[Node], actions)]
     names = g.nodes
     if len(set(listed)) != len(listed):
         twice = next(names[v] for v in listed if listed.count(v) > 1)

@@ -13,7 +13,7 @@ from collections.abc import Callable, Hashable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from types import MappingProxyType
-from typing import Any
+from typing import Any, cast
 
 from .errors import GraphError
 from .indexed import IndexedDiagram, find_open_path, reach
@@ -246,7 +246,8 @@ class CausalDiagram:
             pass
         if isinstance(vs, str):
             raise GraphError(f"unknown node {vs!r}")
-        return {self._id(v) for v in vs}
+        # Not one of our nodes, so the iterable of them that the signature allows.
+        return {self._id(v) for v in cast(Iterable[Node], vs)}
 
     def _names(self, ids: Iterable[int]) -> frozenset[Node]:
         return frozenset(self._nodes[i] for i in ids)
@@ -429,7 +430,7 @@ class CausalDiagram:
                 for c in self._ch[i]:
                     hit |= down(c)
                 reach[i] = hit
-        directed = set()
+        directed: set[tuple[int, int]] = set()
         for a in keep_ids:
             for c in self._ch[a]:
                 directed.update((a, b) for b in down(c))

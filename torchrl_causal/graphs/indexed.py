@@ -21,10 +21,12 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
 from .errors import GraphError
 
 Node = Hashable
+Item = TypeVar("Item", bound=Hashable)
 
 __all__ = ["IndexedDiagram", "UnionFind", "find_open_path", "reach", "shortcut_walk"]
 
@@ -102,7 +104,7 @@ def reach(
     return found
 
 
-class UnionFind:
+class UnionFind(Generic[Item]):
     """Disjoint sets over hashable items, with path halving.
 
     Examples:
@@ -113,17 +115,17 @@ class UnionFind:
         (False, True)
     """
 
-    def __init__(self, items: Iterable[Hashable] = ()) -> None:
-        self._root: dict[Hashable, Hashable] = {v: v for v in items}
+    def __init__(self, items: Iterable[Item] = ()) -> None:
+        self._root: dict[Item, Item] = {v: v for v in items}
 
-    def find(self, item: Hashable) -> Hashable:
+    def find(self, item: Item) -> Item:
         root = self._root
         while root[item] != item:
             root[item] = root[root[item]]
             item = root[item]
         return item
 
-    def union(self, a: Hashable, b: Hashable) -> Hashable | None:
+    def union(self, a: Item, b: Item) -> Item | None:
         """Merges the sets of ``a`` and ``b`` under ``b``'s representative; returns ``a``'s
         former representative (whatever a caller keeps per set moves from it), or None when
         the two were one set already."""
