@@ -26,7 +26,7 @@ import shutil
 import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import torch
 from tensordict import TensorDict, TensorDictBase
@@ -125,7 +125,9 @@ def _rollout_episodes(
 
 
 def _flatten(episodes: list[TensorDictBase]) -> TensorDictBase:
-    data = torch.cat([episode.to_tensordict() for episode in episodes], dim=0)
+    # torch.cat hands tensordicts to tensordict's own cat (__torch_function__), which torch's
+    # annotations cannot see.
+    data = cast(TensorDictBase, torch.cat([episode.to_tensordict() for episode in episodes], dim=0))
     lengths = torch.tensor([episode.shape[0] for episode in episodes])
     is_init = torch.zeros(data.shape[0], 1, dtype=torch.bool)
     is_init[torch.cumsum(lengths, 0) - lengths] = True

@@ -335,9 +335,9 @@ def from_minari_replay(replay_data: TensorDictBase, metadata: Mapping[str, Any])
     out.set("is_init", is_init.unsqueeze(-1))
     out.set("episode", episode.to(torch.int64))
     for name, entry in metadata["manifest"].items():
-        key = tuple(name.split("."))
-        if key in out.keys(include_nested=True, leaves_only=True):
-            out.set(key, out.get(key).to(getattr(torch, entry["dtype"].removeprefix("torch."))))
+        nested = tuple(name.split("."))
+        if nested in out.keys(include_nested=True, leaves_only=True):
+            out.set(nested, out.get(nested).to(getattr(torch, entry["dtype"].removeprefix("torch."))))
     return out
 
 

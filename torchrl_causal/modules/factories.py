@@ -158,7 +158,7 @@ def make_deterministic_actor(
         torch.Size([3, 2])
     """
     spec = bounded_action_spec(action_spec, action_key)
-    body = ResidualMLP(observation_dim, _action_dim(spec), hidden=hidden, num_blocks=num_blocks, dropout=dropout)
+    body: nn.Module = ResidualMLP(observation_dim, _action_dim(spec), hidden=hidden, num_blocks=num_blocks, dropout=dropout)
     if standardize_observation:
         body = nn.Sequential(Standardize(observation_dim), body)
     return TensorDictSequential(

@@ -71,6 +71,10 @@ class Standardize(nn.Module):
                 [ 0.7071,  0.0000]])
     """
 
+    # Buffers (registered in __init__), declared so that they read as tensors.
+    loc: torch.Tensor
+    scale: torch.Tensor
+
     def __init__(self, features: int) -> None:
         super().__init__()
         _check_positive("features", features)

@@ -275,7 +275,8 @@ class DiscriminatorReward(TensorDictModuleBase):
             inputs.set(ABSORBING_KEY, torch.zeros((*inputs.shape, 1), dtype=torch.bool, device=inputs.device))
         with eval_mode(self.discriminator):
             reward = self.reward_from_logits(self.discriminator(inputs).get(self.logits_key))
-            if self.absorbing:
+            # An absorbing discriminator always comes with its gamma (checked in __init__).
+            if self.absorbing and self.gamma is not None:
                 absorbing_state = inputs[(0,) * inputs.batch_dims].unsqueeze(0).apply(torch.zeros_like)
                 absorbing_state.set(ABSORBING_KEY, torch.ones(1, 1, dtype=torch.bool, device=inputs.device))
                 absorbing_reward = self.reward_from_logits(self.discriminator(absorbing_state).get(self.logits_key))

@@ -216,7 +216,7 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
         if self.variant == "paper":
             with torch.no_grad(), eval_mode(self.qvalue_network):
                 next_value = self.soft_values(next_states, self.target_qvalue_network_params).min(0)[0].mean(0)
-            value_term = 0.0
+            value_term: torch.Tensor | float = 0.0
         else:
             keys = list({*self.actor_network.in_keys, *self.qvalue_network.in_keys} - {self.tensor_keys.action})
             both = torch.cat([tensordict.select(*keys, strict=False), next_states.select(*keys, strict=False)])

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, Literal
 
 import torch
 from tensordict import TensorDictBase, unravel_key
@@ -174,7 +174,7 @@ class CausalWindowTransform(Transform):
         k: int,
         *,
         causal: bool = True,
-        mode: str = "relaxed",
+        mode: Literal["exact", "relaxed"] = "relaxed",
         window_matched: bool = False,
         **kwargs: Any,
     ) -> CausalWindowTransform:
@@ -236,7 +236,8 @@ class CausalWindowTransform(Transform):
                 raise RuntimeError(
                     "the variable shapes are unknown: attach the transform to an env, encode data first, or pass shapes explicitly"
                 )
-            self._leaf_specs(self.parent.full_observation_spec, self.parent.full_action_spec)
+            _, layout, _ = self._leaf_specs(self.parent.full_observation_spec, self.parent.full_action_spec)
+            return layout
         return self._layout
 
     def _set_layout(self, shapes: Mapping[str, tuple[int, ...]], dtype: torch.dtype | None) -> WindowLayout:
@@ -257,8 +258,9 @@ class CausalWindowTransform(Transform):
     def _variable_key(self, var: str) -> NestedKey:
         return self.action_key if var == self.window.action else var
 
-    def _leaf_specs(self, observation_spec: Composite, action_spec: Composite) -> dict[str, TensorSpec]:
-        """The spec of every encoded variable, validated; records the layout."""
+    def _leaf_specs(self, observation_spec: Composite, action_spec: Composite) -> tuple[dict[str, TensorSpec], WindowLayout, torch.dtype]:
+        """The spec of every encoded variable, validated; records (and returns) the layout and
+        the encoding's dtype."""
         leaves: dict[str, TensorSpec] = {}
         for var, lags in self.window.lags.items():
             if not lags:
@@ -273,25 +275,26 @@ class CausalWindowTransform(Transform):
             leaves[var] = container[key]
         batch_ndim = observation_spec.ndim
         shapes = {var: tuple(spec.shape[batch_ndim:]) for var, spec in leaves.items()}
-        self._set_layout(shapes, _encoding_dtype(spec.dtype for spec in leaves.values()))
-        return leaves
+        dtype = _encoding_dtype(spec.dtype for spec in leaves.values())
+        return leaves, self._set_layout(shapes, dtype), dtype
 
     # ------------------------------------------------------------------ specs
 
     def transform_observation_spec(self, observation_spec: Composite) -> Composite:
-        leaves = self._leaf_specs(observation_spec, self.parent.full_action_spec)
-        layout, dtype = self._layout, self._dtype
+        leaves, layout, dtype = self._leaf_specs(observation_spec, self.parent.full_action_spec)
         batch = observation_spec.shape
         shape = (*batch, layout.num_features)
         bounds = {var: spec_bounds(spec, len(batch), dtype) for var, spec in leaves.items()}
         if all(b is None for b in bounds.values()):
             encoding_spec = Unbounded(shape=shape, dtype=dtype, device=observation_spec.device)
         else:
+            filled: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
             for var, b in bounds.items():
                 if b is None:
                     infinite = torch.full((*batch, layout.widths[var]), torch.inf, dtype=dtype, device=observation_spec.device)
-                    bounds[var] = (-infinite, infinite)
-            low, high = layout.bounds(bounds)
+                    b = (-infinite, infinite)
+                filled[var] = b
+            low, high = layout.bounds(filled)
             encoding_spec = Bounded(low=low, high=high, shape=shape, dtype=dtype, device=observation_spec.device)
         for key in self.hidden_keys:
             if key in observation_spec.keys():
@@ -325,7 +328,7 @@ class CausalWindowTransform(Transform):
         ring = self._ring
         if ring is None:
             raise RuntimeError(f"{type(self).__name__}: reset the env before stepping it")
-        layout = self._layout
+        layout = self._require_layout()
         batch = next_tensordict.batch_size
         if layout.has_action:
             action = tensordict.get(self.action_key, None)
@@ -365,7 +368,7 @@ class CausalWindowTransform(Transform):
     def _raise_shape_error(self, tensordict: TensorDictBase, batch: torch.Size, variables: Sequence[str]) -> None:
         for var in variables:
             key = self._variable_key(var)
-            expected = (*batch, *self._layout.shapes[var])
+            expected = (*batch, *self._require_layout().shapes[var])
             got = tuple(tensordict.get(key).shape)
             if got != expected:
                 raise ValueError(f"shape mismatch for key {key!r}: expected {expected}, got {got}")
@@ -390,7 +393,7 @@ class CausalWindowTransform(Transform):
         if not nan_columns.numel():
             return
         column = int(nan_columns[0])
-        feature = next(f for f in self._layout.features if f.columns.start <= column < f.columns.stop)
+        feature = next(f for f in self._require_layout().features if f.columns.start <= column < f.columns.stop)
         raise ValueError(
             f"NaN in admissible key {self._variable_key(feature.variable)!r} at lag {feature.lag}; "
             "refusing to feed it to the policy (check_nan=False disables this check)"
@@ -603,7 +606,8 @@ class CausalWindowTransform(Transform):
             self._set_layout({var: tuple(s) for var, s in state["shapes"].items()}, None)
         if state.get("ring") is not None:
             frames = state["ring"]["frames"]
-            self._ring = LagRing(self._require_layout(), frames.new_zeros((*frames.shape[:-2], self._layout.state_width)))
+            layout = self._require_layout()
+            self._ring = LagRing(layout, frames.new_zeros((*frames.shape[:-2], layout.state_width)))
             self._ring.restore(frames, int(state["ring"]["slot"]))
 
     def __repr__(self) -> str:
@@ -640,7 +644,7 @@ def imitator_window(
     k: int,
     *,
     causal: bool = True,
-    mode: str = "relaxed",
+    mode: Literal["exact", "relaxed"] = "relaxed",
     window_matched: bool = False,
 ) -> AdjustmentWindow:
     """The window an imitator conditions on, from a template alone (no env built).

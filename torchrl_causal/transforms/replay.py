@@ -11,7 +11,7 @@ the pair.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import torch
 from tensordict import TensorDictBase, unravel_key
@@ -110,7 +110,9 @@ class EpisodeHistory(Sequence):
             )
         if isinstance(index, tuple):  # coordinates, as SliceSampler gives them: one per storage dim
             (index,) = index
-        index, info = super().expand(index, info, storage)
+        expanded, info = super().expand(index, info, storage)
+        # On a 1-D storage (checked above) Sequence gives one tensor of record indices.
+        index = cast(torch.Tensor, expanded)
         width = self.window_length
         windows = index.reshape(-1, width)
         # linked[b, j]: record j of window b is a genuine step of the sampled step's trajectory
