@@ -19,6 +19,7 @@ import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import cast
 
 import torch
 from hydra.utils import get_class
@@ -134,7 +135,7 @@ def _claim_and_run(
     created: Path | None,
 ) -> dict[str, EvaluationResult]:
     extendable = trainer_class is not None and trainer_class.extendable_budget(cfg)
-    run_dir.claim(cfg, ignored=(trainer_class.budget_key,) if extendable else ())
+    run_dir.claim(cfg, ignored=(trainer_class.budget_key,) if trainer_class is not None and extendable else ())
     status = run_dir.read_status()
     if status.get("status") == "complete" and status.get("total") == total:
         log.info("%s is complete: its stored evaluations are returned", run_dir.path)
@@ -170,6 +171,7 @@ def _train_and_evaluate(
     if trainer_class is None:  # what the trainer records for a trained run: code, packages, CPU, threads
         run_dir.record_attempt(attempt_identity(None, cfg.compile, device), progress=0)
     else:
+        window = cast(AdjustmentWindow, window)  # run() makes the window of every trained run
         run_dir.write_json(run_dir.window_file, window.to_dict())
         trainer = trainer_class(cfg, run_dir, window, evaluator.periodic, device=device)
         trainer.fit()

@@ -30,7 +30,7 @@ import sys
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
@@ -116,7 +116,8 @@ def parse_arguments(command: str, argv: Sequence[str], options: Mapping[str, Opt
     """
     line = usage(command, options)
     try:
-        args = OmegaConf.to_container(OmegaConf.from_cli(list(argv)))
+        # from_cli builds a DictConfig, whose container is a dict keyed by the argument names.
+        args = cast(dict[str, Any], OmegaConf.to_container(OmegaConf.from_cli(list(argv))))
     except (OmegaConfBaseException, ValueError) as error:
         raise SystemExit(f"error: cannot parse the arguments ({str(error).splitlines()[0]}); {line}") from None
     unknown = sorted(set(args) - set(options))
@@ -170,7 +171,7 @@ def one_line_errors(*user_errors: type[BaseException]) -> Iterator[None]:
         ...
         SystemExit: error: /nonexistent/file: No such file or directory
     """
-    caught = (OSError, ValueError, MemoryError, OmegaConfBaseException, *user_errors)
+    caught: tuple[type[BaseException], ...] = (OSError, ValueError, MemoryError, OmegaConfBaseException, *user_errors)
     try:
         yield
     except caught as error:

@@ -58,11 +58,10 @@ def main(argv: Sequence[str] | None = None) -> EvaluationResult:
     torch.set_num_threads(args.pop("threads"))
     with one_line_errors(CheckpointError):
         result = evaluate_run(**args)
-    s = result.summary()
     print(
-        f"{args['run_dir']} [{s['regime']}] episodes {s['n_episodes']}: success {100 * s['success_rate']:.1f}% "
-        f"± {100 * s['success_se']:.1f}, E[Y] {s['return_mean']:.1f} ± {s['return_std']:.1f}, "
-        f"successful episode length {_pm(s['ep_len_mean'], s['ep_len_std'], 0)}"
+        f"{args['run_dir']} [{result.regime}] episodes {result.n_episodes}: success {100 * result.success_rate:.1f}% "
+        f"± {100 * result.success_se:.1f}, E[Y] {result.return_mean:.1f} ± {result.return_std:.1f}, "
+        f"successful episode length {_pm(result.ep_len_mean, result.ep_len_std, 0)}"
     )
     return result
 

@@ -98,9 +98,10 @@ class Evaluator:
         """
         env = self.make_env(regime, min(num_envs or self.cfg.eval.num_envs, episodes), seed)
         acting = self.acting_policy(policy, env)
-        was_training = getattr(acting, "training", None)  # scripted experts may be plain callables
-        if was_training is not None:
-            acting.eval()
+        module = acting if isinstance(acting, torch.nn.Module) else None  # scripted experts may be plain callables
+        was_training = module is not None and module.training
+        if module is not None:
+            module.eval()
         try:
             return evaluate_policy(
                 env,
@@ -114,8 +115,8 @@ class Evaluator:
                 progress=self.progress,
             )
         finally:
-            if was_training is not None:
-                acting.train(was_training)
+            if module is not None:
+                module.train(was_training)
             env.close()
 
     def periodic(self, policy: Policy) -> EvaluationResult:

@@ -259,7 +259,7 @@ def write_report(
             "rate's standard error over the pooled episodes (as the paper's Table 1).",
             "",
         ]
-        if setting in carried_labels:
+        if carried is not None and setting in carried_labels:
             lines += [
                 f"Carried from `{Path(carried).name}` (an earlier report; their runs' records are not below "
                 "the runs folder, so the training curves and trajectories do not show them): "

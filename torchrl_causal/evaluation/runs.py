@@ -281,8 +281,8 @@ def mean_curve(curves: Iterable[Sequence[tuple[int, float]]]) -> list[tuple[int,
         >>> mean_curve([[(0, 1.0), (5, 3.0)], [(0, 3.0), (5, 5.0), (9, 0.0)]])
         [(0, 2.0), (5, 4.0)]
     """
-    curves = [dict(c) for c in curves if c]
-    if not curves:
+    by_step = [dict(c) for c in curves if c]
+    if not by_step:
         return []
-    steps = sorted(set.intersection(*(set(c) for c in curves)))
-    return [(s, math.fsum(c[s] for c in curves) / len(curves)) for s in steps]
+    steps = sorted(set.intersection(*(set(c) for c in by_step)))
+    return [(s, math.fsum(c[s] for c in by_step) / len(by_step)) for s in steps]

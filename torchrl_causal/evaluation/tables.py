@@ -90,7 +90,7 @@ class ReportedResult:
     seed_count: int
 
     @classmethod
-    def from_row(cls, row: Mapping[str, object]) -> ReportedResult:
+    def from_row(cls, row: Mapping[str, float | str]) -> ReportedResult:
         """From a results-CSV row (:data:`CSV_COLUMNS`; an empty cell is NaN)."""
 
         def number(key: str) -> float:
@@ -98,10 +98,15 @@ class ReportedResult:
             return math.nan if value == "" else float(value)
 
         return cls(
-            str(row["regime"]),
-            *(number(key) for key in ("success_rate", "success_se", "return_mean", "return_std", "ep_len_mean", "ep_len_std")),
-            int(row["n_episodes"]),
-            int(row["seeds"]),
+            regime=str(row["regime"]),
+            success_rate=number("success_rate"),
+            success_se=number("success_se"),
+            return_mean=number("return_mean"),
+            return_std=number("return_std"),
+            ep_len_mean=number("ep_len_mean"),
+            ep_len_std=number("ep_len_std"),
+            n_episodes=int(row["n_episodes"]),
+            seed_count=int(row["seeds"]),
         )
 
     def summary(self) -> dict[str, float | int | str]:
@@ -192,7 +197,7 @@ def normalised_returns(table: Table, regime: str = "deploy") -> dict[str, float]
 
 def csv_rows(table: Table) -> list[dict[str, object]]:
     """One row per algorithm and regime, with :data:`CSV_COLUMNS`."""
-    rows = []
+    rows: list[dict[str, object]] = []
     for label in ordered_labels(table):
         for regime in REGIMES:
             if regime in table[label]:
@@ -218,7 +223,7 @@ def _pm(value: float, spread: float, digits: int = 1, bold: bool = False) -> str
 
 def _best_non_expert(values: Mapping[str, float]) -> str | None:
     candidates = {label: v for label, v in values.items() if label != "expert" and not math.isnan(v)}
-    return max(candidates, key=candidates.get) if candidates else None
+    return max(candidates, key=candidates.__getitem__) if candidates else None
 
 
 def _markdown(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:

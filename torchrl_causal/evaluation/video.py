@@ -52,14 +52,15 @@ class VideoFile:
             raise ValueError(f"fps must be >= 1, got {fps}")
         self.fps = fps
 
-    def log_video(self, name: str, video: torch.Tensor, step: int | None = None, **kwargs: object) -> None:
+    def log_video(self, name: str, video: torch.Tensor, step: int | None = None, *, fps: float | None = None, **kwargs: object) -> None:
         """Writes ``video`` (``[1, T, C, H, W]`` or ``[T, C, H, W]`` uint8, as
-        :class:`~torchrl.record.VideoRecorder` passes it); ``name`` and ``step`` are unused."""
+        :class:`~torchrl.record.VideoRecorder` passes it) at ``fps`` (default: this file's);
+        ``name``, ``step`` and other options of other loggers are unused."""
         require_extra("writing videos", "imageio")
         import imageio.v3 as iio
 
         frames = video.reshape(-1, *video.shape[-3:]).permute(0, 2, 3, 1).contiguous().numpy()
-        fps = int(kwargs.get("fps", self.fps))
+        fps = int(self.fps if fps is None else fps)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if self.path.suffix == ".gif":
             iio.imwrite(self.path, frames, extension=".gif", duration=1000 / fps, loop=0)

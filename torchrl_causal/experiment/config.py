@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
@@ -75,7 +76,7 @@ def rows(which: str) -> str:
     return row_names(ROW_SETS[which])
 
 
-_RESOLVERS = {"run_label": run_label, "stable_id": stable_id, "product": product, "rows": rows}
+_RESOLVERS: dict[str, Callable[..., Any]] = {"run_label": run_label, "stable_id": stable_id, "product": product, "rows": rows}
 
 
 def register_resolvers() -> None:

@@ -29,7 +29,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from types import FrameType
-from typing import Any
+from typing import Any, TypeGuard
 
 __all__ = ["RunInterrupted", "DeferredSignals", "deferred_signals", "run_in_processes", "signals_raise"]
 
@@ -60,15 +60,18 @@ class RunInterrupted(Exception):
 
 
 Handler = Callable[[int, FrameType | None], None]
+#: What ``signal.signal`` returns: a Python handler, a ``signal.Handlers`` value (SIG_DFL,
+#: SIG_IGN) or an int, or None for a handler not installed from Python.
+PreviousHandler = Callable[[int, FrameType | None], Any] | int | signal.Handlers | None
 
 
 @contextmanager
-def _handlers(handler: Handler) -> Iterator[dict[int, object]]:
+def _handlers(handler: Handler) -> Iterator[dict[int, PreviousHandler]]:
     """Installs ``handler`` for the run's signals; yields the handlers it replaced."""
     if threading.current_thread() is not threading.main_thread():
         yield {}
         return
-    previous = {number: signal.signal(number, handler) for number in _SIGNALS}
+    previous: dict[int, PreviousHandler] = {number: signal.signal(number, handler) for number in _SIGNALS}
     try:
         yield previous
     finally:
@@ -80,7 +83,7 @@ def _raise(number: int, frame: FrameType | None) -> None:
     raise RunInterrupted(number)
 
 
-def _chained(handler: object) -> bool:
+def _chained(handler: PreviousHandler) -> TypeGuard[Callable[[int, FrameType | None], Any]]:
     """Whether ``handler`` is another program's Python handler to pass the signal on to
     (not the default action, ignoring, or Python's KeyboardInterrupt)."""
     return callable(handler) and handler is not signal.default_int_handler
@@ -223,10 +226,10 @@ def run_in_processes(function: Callable[[Any], int], tasks: Sequence[Any], worke
             if not running:
                 break
             multiprocessing.connection.wait([process.sentinel for process in running.values()], timeout=1.0)
-            for index, process in list(running.items()):
-                if process.exitcode is not None:
-                    codes[index] = process.exitcode
-                    if process.exitcode != 0:
+            for index, child in list(running.items()):
+                if child.exitcode is not None:
+                    codes[index] = child.exitcode
+                    if child.exitcode != 0:
                         stop.set()  # an interrupted or failed run: start nothing new
                     del running[index]
     return codes

@@ -38,7 +38,7 @@ from omegaconf import DictConfig, OmegaConf
 from torchrl.data import Composite, TensorSpec
 
 from torchrl_causal.experiment.builders import make_env, make_imitator_env, make_window
-from torchrl_causal.experiment.schema import ConfigValueError, GAILConfig, OffPolicyConfig
+from torchrl_causal.experiment.schema import ConfigValueError, GAILConfig, OffPolicyConfig, algo_schema_of
 
 __all__ = [
     "GB",
@@ -144,7 +144,7 @@ def run_footprint(cfg: DictConfig) -> Footprint:
     if not cfg.algo.trainer:  # the expert row only evaluates
         return Footprint(ram={"libraries": LIBRARIES_BYTES, "evaluation envs (eval.num_envs)": 4 * cfg.eval.num_envs * raw_step}, disk={})
     step = encoded_transition_bytes(cfg)
-    algo, schema = cfg.algo, OmegaConf.get_type(cfg.algo)
+    algo, schema = cfg.algo, algo_schema_of(cfg)
     demos = _demonstration_transitions(cfg)
     ram = {
         "libraries": LIBRARIES_BYTES,

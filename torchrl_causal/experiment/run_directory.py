@@ -40,7 +40,7 @@ import socket
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import torch
 from omegaconf import DictConfig, OmegaConf
@@ -345,9 +345,10 @@ class RunDirectory:
         Raises:
             ConfigMismatchError: naming every key whose value differs.
         """
-        resolved = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+        # The containers of DictConfigs are dicts keyed by the config's (string) keys.
+        resolved = cast(dict[str, Any], OmegaConf.to_container(cfg, resolve=True, enum_to_str=True))
         if self.config_file.is_file():
-            stored = OmegaConf.to_container(self.read_config())
+            stored = cast(dict[str, Any], OmegaConf.to_container(self.read_config()))
             changes = changed_keys(stored, resolved, (*RUNTIME_KEYS, *ignored))
             if changes:
                 listed = "; ".join(f"{key}: {old!r} -> {new!r}" for key, (old, new) in changes.items())

@@ -62,6 +62,7 @@ __all__ = [
     "OffPolicyConfig",
     "WindowConfig",
     "WindowMode",
+    "algo_schema_of",
     "register_configs",
     "validate_config",
 ]
@@ -461,6 +462,14 @@ def algo_schema(name: str) -> type[AlgoConfig]:
         return AlgoConfig
 
 
+def algo_schema_of(cfg: DictConfig) -> type:
+    """The type of ``cfg.algo``: the schema it was composed with (``dict`` when untyped)."""
+    schema = OmegaConf.get_type(cfg.algo)
+    if schema is None:
+        raise ConfigValueError(f"algo is null: choose an algorithm ({', '.join(ALGO_SCHEMAS)})")
+    return schema
+
+
 def register_configs() -> None:
     """Stores the schemas in Hydra's ConfigStore (idempotent): ``schema`` for the top
     level, ``schema_<algo>`` in the ``algo`` group; and the ``row`` group, one option per
@@ -470,8 +479,8 @@ def register_configs() -> None:
     store.store(name="schema", node=Config)
     for name, schema in ALGO_SCHEMAS.items():
         store.store(group="algo", name=f"schema_{name}", node=schema)
-    for name, schema in LOGGER_SCHEMAS.items():
-        store.store(group="logger", name=f"schema_{name}", node=schema)
+    for name, logger_schema in LOGGER_SCHEMAS.items():
+        store.store(group="logger", name=f"schema_{name}", node=logger_schema)
     for row in ROWS:
         defaults = [{"override /algo": row.algorithm}, {"override /window": row.window}, "_self_"]
         store.store(group="row", name=row.name, package="_global_", node={"defaults": defaults, "causal": row.causal})
@@ -499,7 +508,7 @@ def _check_ranges(node: DictConfig, where: str) -> None:
 
 def _leaves(node: Any, where: str) -> list[str]:
     if isinstance(node, DictConfig) and config_holds_value(node) and len(node):
-        return [leaf for key in node.keys() for leaf in _leaves(config_child(node, key), f"{where}.{key}")]
+        return [leaf for key in node.keys() for leaf in _leaves(config_child(node, key), f"{where}.{key!s}")]
     return [where]
 
 
@@ -511,7 +520,7 @@ def _unknown_keys(node: DictConfig, where: str) -> list[str]:
     if schema is None or not dataclasses.is_dataclass(schema):
         return []  # a free-form node (``env.make``, ``env.expert``): its target's arguments
     declared = {spec.name for spec in dataclasses.fields(schema)}
-    unknown = [leaf for key in node.keys() if key not in declared for leaf in _leaves(config_child(node, key), f"{where}{key}")]
+    unknown = [leaf for key in node.keys() if key not in declared for leaf in _leaves(config_child(node, key), f"{where}{key!s}")]
     for key in declared & set(node.keys()):
         value = config_child(node, key)
         if isinstance(value, DictConfig) and config_holds_value(value):
@@ -575,7 +584,7 @@ def _check_device(cfg: DictConfig) -> None:
 
 def _check_algorithm(cfg: DictConfig) -> None:
     """What one algorithm needs beyond the ranges of its fields."""
-    algo, schema = cfg.algo, OmegaConf.get_type(cfg.algo)
+    algo, schema = cfg.algo, algo_schema_of(cfg)
     if schema is GAILConfig and algo.actor.dropout != 0:
         raise ConfigValueError(
             f"algo.actor.dropout must be 0 for GAIL, got {algo.actor.dropout}: PPO's probability "

@@ -228,6 +228,8 @@ class Trainer(ABC):
     # ------------------------------------------------------------------ the loop
 
     def _log(self, scalars: Mapping[str, float], step: int) -> None:
+        if self.logger is None:
+            raise RuntimeError(f"{type(self).__name__}: the logger starts in fit(); train with fit() before logging")
         for name, value in scalars.items():
             self.logger.log_scalar(name, float(value), step=step)
 
@@ -296,9 +298,9 @@ class Trainer(ABC):
                 scalars = self.train_step()
                 bar.update(self.progress - before)
                 if scalars:
-                    scalars = {name: float(value) for name, value in scalars.items()}  # the one device read per log
-                    self._log(scalars, self.progress)
-                    bar.set_postfix({k.split("/")[-1]: f"{v:.3g}" for k, v in scalars.items()}, refresh=False)
+                    read = {name: float(value) for name, value in scalars.items()}  # the one device read per log
+                    self._log(read, self.progress)
+                    bar.set_postfix({k.split("/")[-1]: f"{v:.3g}" for k, v in read.items()}, refresh=False)
                 if before // every != self.progress // every:
                     self.periodic_evaluation()
                 elif self.checkpoint_due():

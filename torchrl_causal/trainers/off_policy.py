@@ -111,6 +111,11 @@ class OffPolicyILTrainer(Trainer):
         """``algo.warm_start`` (``bc_updates``, ``critic_updates``), or ``None`` (the paper's cold start)."""
         return self.cfg.algo.get("warm_start")
 
+    def _required_warm_start(self) -> DictConfig:
+        if self.warm_start is None:
+            raise RuntimeError(f"{type(self).__name__}: a warm start needs algo.warm_start (bc_updates, critic_updates)")
+        return self.warm_start
+
     @property
     def policy(self) -> TensorDictModuleBase:
         return self.loss.actor_network
@@ -170,6 +175,11 @@ class OffPolicyILTrainer(Trainer):
             self.collector = self._make_collector()
             self.batches = iter(self.collector)
 
+    def _built_collector(self) -> ResumableCollector | MultiSyncCollector:
+        if self.collector is None:
+            raise RuntimeError(f"{type(self).__name__}: the collector is not built (or closed already)")
+        return self.collector
+
     def _replay_format(self, transitions: TensorDictBase) -> TensorDictBase:
         return add_absorbing_transitions(transitions) if self.cfg.algo.loss.absorbing else transitions
 
@@ -226,7 +236,7 @@ class OffPolicyILTrainer(Trainer):
         """Warm start, part 1: ``warm_start.bc_updates`` steps of maximum-likelihood behaviour
         cloning of the actor on the expert buffer (its own Adam, ``algo.actor_optimizer``'s
         settings), before the first env step."""
-        updates = self.warm_start.bc_updates
+        updates = self._required_warm_start().bc_updates
         optimizer = instantiate(self.cfg.algo.actor_optimizer)(list(self.loss.actor_network_params.flatten_keys().values()))
         for step in range(1, updates + 1):
             nll = self.loss.behaviour_cloning_nll(self.expert_buffer.sample())
@@ -240,7 +250,7 @@ class OffPolicyILTrainer(Trainer):
     def fit_critics(self) -> None:
         """Warm start, part 2: ``warm_start.critic_updates`` critic-only updates on expert and
         policy batches, the warm-started actor held fixed, before the first joint update."""
-        updates = self.warm_start.critic_updates
+        updates = self._required_warm_start().critic_updates
         for step in range(1, updates + 1):
             loss = self.update.critic_step(self.sample_batch())
             if step % 1000 == 0 or step == updates:
@@ -295,7 +305,7 @@ class OffPolicyILTrainer(Trainer):
             "loss": self.loss.state_dict(),
             **self.update.state_dict(),
             "policy_buffer_len": len(self.policy_buffer),
-            "collector": self.collector.state_dict() if self.workers == 1 else {},
+            "collector": self._built_collector().state_dict() if self.workers == 1 else {},
             "scalar_sums": self.scalar_sums,
             "batches_since_log": self.batches_since_log,
             "updates_since_log": self.updates_since_log,
@@ -319,7 +329,7 @@ class OffPolicyILTrainer(Trainer):
                     state["policy_buffer_len"],
                 )
         if self.workers == 1:
-            self.collector.load_state_dict(state["collector"])
+            self._built_collector().load_state_dict(state["collector"])
         self.scalar_sums = state["scalar_sums"].to(self.device)
         self.batches_since_log = int(state["batches_since_log"])
         self.updates_since_log = int(state["updates_since_log"])

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Callable, Iterable, Mapping
-from typing import Any
+from typing import Any, cast
 
 import torch
 from tensordict import TensorDictBase
@@ -30,7 +30,8 @@ def _build_optimizer(factory: OptimizerFactory, params: list[torch.Tensor]) -> t
     # On CUDA a fused step is one kernel per step instead of one per tensor, where the
     # optimiser offers it.
     if params[0].device.type == "cuda" and "fused" in inspect.signature(factory).parameters:
-        return factory(params, fused=True)
+        # The signature just checked takes ``fused``, which OptimizerFactory does not name.
+        return cast(Callable[..., torch.optim.Optimizer], factory)(params, fused=True)
     return factory(params)
 
 
@@ -163,7 +164,8 @@ class ActorCriticUpdate:
         torch.nn.utils.clip_grad_norm_(self.actor_params, self.max_grad_norm)
         for optimizer in self.optimizers:
             optimizer.step()
-        if self.critic_schedule is not None and self.updates < self.cosine_updates:
+        # A schedule always comes with its span (checked in __init__).
+        if self.critic_schedule is not None and self.cosine_updates is not None and self.updates < self.cosine_updates:
             self.critic_schedule.step()
         self.target_updater.step()
         self.updates += 1
