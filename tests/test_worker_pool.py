@@ -31,6 +31,16 @@ def quick(folder: str) -> int:
 
 
 def test_sigint_starts_no_new_run_and_reaches_each_worker_once(tmp_path: Path) -> None:
+    # A suite started as a background job (`nohup ... &`) inherits SIGINT ignored: install
+    # Python's own handler so that "the parent's handler is back" means the same everywhere.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        _interrupt_two_of_three(tmp_path)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _interrupt_two_of_three(tmp_path: Path) -> None:
     folders = [tmp_path / f"task{i}" for i in range(3)]
     for folder in folders:
         folder.mkdir()
