@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -36,16 +37,29 @@ TINY = [
 ]
 
 
-def _train(root: Path, *overrides: str, **kwargs) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, "-m", "torchrl_causal.train", f"run_root={root}", *TINY, *overrides],
-        cwd=root.parent,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env={**os.environ, "OMP_NUM_THREADS": "1"},
-        **kwargs,
-    )
+@pytest.fixture
+def train_process() -> Iterator[Callable[..., subprocess.Popen]]:
+    """Starts ``python -m torchrl_causal.train`` on a tiny run; kills what is still running at
+    teardown, so a failed or timed-out test leaves no training behind."""
+    started: list[subprocess.Popen] = []
+
+    def start(root: Path, *overrides: str) -> subprocess.Popen:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "torchrl_causal.train", f"run_root={root}", *TINY, *overrides],
+            cwd=root.parent,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "OMP_NUM_THREADS": "1"},
+        )
+        started.append(process)
+        return process
+
+    yield start
+    for process in started:
+        if process.poll() is None:
+            process.kill()
+            process.communicate(timeout=60)
 
 
 def test_an_out_of_range_value_stops_with_one_line_and_no_run_directory(tmp_path: Path) -> None:
@@ -60,9 +74,9 @@ def test_an_out_of_range_value_stops_with_one_line_and_no_run_directory(tmp_path
     assert not root.exists()
 
 
-def test_ctrl_c_checkpoints_marks_the_run_and_prints_how_to_resume(tmp_path: Path) -> None:
+def test_ctrl_c_checkpoints_marks_the_run_and_prints_how_to_resume(tmp_path: Path, train_process: Callable[..., subprocess.Popen]) -> None:
     root = tmp_path / "runs"
-    process = _train(root, "algo.total_steps=1000000", "algo.eval_every=100000", "checkpoint_every_s=3600")
+    process = train_process(root, "algo.total_steps=1000000", "algo.eval_every=100000", "checkpoint_every_s=3600")
     status_file = None
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and process.poll() is None:
