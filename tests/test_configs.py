@@ -160,7 +160,7 @@ def test_groups_are_the_expected_ones() -> None:
 @pytest.mark.parametrize("env", GROUPS["env"])
 def test_every_group_combination_composes_validates_and_resolves_its_targets(env: str) -> None:
     """env x algo x scale in full (``algo_scale`` depends on the algo and scale pair);
-    window and logger, which interact with nothing but ``${env.window_k}``, take each of
+    window and logger, which interact with nothing but ``${env.paper.window_k}``, take each of
     their two options with every env and every algo."""
     for index, (algo, scale) in enumerate(itertools.product(GROUPS["algo"], GROUPS["scale"])):
         window = GROUPS["window"][index % 2]

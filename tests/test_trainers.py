@@ -167,6 +167,25 @@ def test_a_run_made_before_an_option_existed_is_still_its_run(trained_runs) -> N
         config_file.write_text(stored)
 
 
+def test_a_run_made_before_a_key_moved_is_still_its_run(trained_runs) -> None:
+    """Before ``env.window_k`` moved to ``env.paper.window_k``, Route Choice stored k = 0 in
+    the first and its family's 10 in the second: the migration must give back the run's 0."""
+    cfg = tiny_config(trained_runs["route_choice"], "route_choice", "bc", True)
+    config_file = Path(cfg.run_dir) / "config.yaml"
+    stored = config_file.read_text()
+    old_layout = OmegaConf.load(config_file)
+    assert old_layout.env.paper.window_k == old_layout.window.k == 0
+    old_layout.env.window_k, old_layout.env.paper.window_k = 0, 10
+    try:
+        OmegaConf.save(old_layout, config_file)
+        assert RunDirectory(cfg.run_dir).read_config().env.paper.window_k == 0
+        assert run(cfg)["deploy"].n_episodes == 8
+        rewritten = OmegaConf.load(config_file)  # the claim wrote the current layout
+        assert "window_k" not in rewritten.env and rewritten.env.paper.window_k == 0
+    finally:
+        config_file.write_text(stored)
+
+
 # (window.mode=exact is refused earlier now, as a non-imitable diagram, before the run's config is read.)
 @pytest.mark.parametrize(
     "change", ["env.make.maze=medium", "algo.optimizer.lr=0.01", "algo.actor.hidden=32", "algo.patience=3", "eval.final_episodes=9"]

@@ -65,8 +65,10 @@ __all__ = [
     "RunInUseError",
     "atomic_save",
     "atomic_write_text",
+    "MOVED_KEYS",
     "changed_keys",
     "load_checkpoint",
+    "migrate_config",
     "run_label",
 ]
 
@@ -99,6 +101,38 @@ RUNTIME_KEYS: tuple[str, ...] = (
     "run_dir",
     "demos.path",
 )
+
+#: ``{old dotted key: new dotted key}`` for every config key an earlier layout of the
+#: configs wrote under another name. :meth:`RunDirectory.read_config` renames them, so runs
+#: on disk and the records archived under ``results/runs`` keep resuming, evaluating and
+#: reporting after a move.
+MOVED_KEYS: dict[str, str] = {
+    # The window's k went paper family -> env.window_k -> window.k; window.k now reads the
+    # family's value directly (Route Choice overrides it there), one hop like the others.
+    "env.window_k": "env.paper.window_k",
+}
+
+
+def migrate_config(config: DictConfig, moved: Mapping[str, str] = MOVED_KEYS) -> DictConfig:
+    """``config`` with each key of ``moved`` renamed to its new place (in place; a config
+    without the old key is left as it is). The old key's value wins over one already at the
+    new place: it is the value the run used.
+
+    Examples:
+        >>> old = OmegaConf.create({"env": {"window_k": 0, "paper": {"window_k": 10}}, "window": {"k": 0}})
+        >>> OmegaConf.to_container(migrate_config(old))
+        {'env': {'paper': {'window_k': 0}}, 'window': {'k': 0}}
+        >>> OmegaConf.to_container(migrate_config(OmegaConf.create({"env": {"paper": {"window_k": 2}}})))
+        {'env': {'paper': {'window_k': 2}}}
+    """
+    for old, new in moved.items():
+        parent_key, _, leaf = old.rpartition(".")
+        parent = OmegaConf.select(config, parent_key) if parent_key else config
+        if isinstance(parent, DictConfig) and leaf in parent:
+            value = parent[leaf]
+            del parent[leaf]
+            OmegaConf.update(config, new, value, merge=False, force_add=True)
+    return config
 
 
 class CheckpointError(TorchRLCausalError, RuntimeError):
@@ -317,7 +351,7 @@ class RunDirectory:
     # ------------------------------------------------------------------ config
 
     def read_config(self) -> DictConfig:
-        """``config.yaml``.
+        """``config.yaml``, in the current layout of the configs (:func:`migrate_config`).
 
         Raises:
             FileNotFoundError: the directory holds no run.
@@ -334,7 +368,7 @@ class RunDirectory:
             ) from None
         if not isinstance(config, DictConfig):
             raise RunFileError(f"{self.config_file} is corrupted (not a mapping): restore it or train the run again")
-        return config
+        return migrate_config(config)
 
     def claim(self, cfg: DictConfig, ignored: Iterable[str] = ()) -> None:
         """Makes this directory the run of ``cfg``, refusing another run's directory.

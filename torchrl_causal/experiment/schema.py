@@ -276,7 +276,6 @@ class EnvConfig:
     name: str = MISSING
     horizon: int = at_least()
     confounding_strength: float = unit_interval()
-    window_k: int = at_least(0)
     position_key: Optional[str] = None
     make: Any = MISSING
     expert: Any = MISSING  # null: none yet (training refuses the env)
