@@ -29,12 +29,14 @@ from typing import Any, ClassVar, Protocol
 import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDict
 from tensordict.nn import TensorDictModuleBase
 from torchrl.record.loggers import Logger
 
 from torchrl_causal.data.sources import source_checksum
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.progress import progress
+from torchrl_causal.experiment.builders import expert_transitions, load_or_collect_demonstrations
 from torchrl_causal.experiment.device import resolve_device
 from torchrl_causal.experiment.interrupts import RunInterrupted, deferred_signals
 from torchrl_causal.experiment.provenance import attempt_identity, identity_changes
@@ -161,6 +163,13 @@ class Trainer(ABC):
 
     def finish(self) -> None:
         """Called once the run is complete: drops what only a continuation would need."""
+
+    # ------------------------------------------------------------------ shared by the loops
+
+    def expert_transitions(self) -> TensorDict:
+        """The run's demonstrations (loaded, or collected once) as transitions on the run's
+        adjustment window: what the imitators that learn from expert transitions read."""
+        return expert_transitions(self.window, load_or_collect_demonstrations(self.cfg))
 
     # ------------------------------------------------------------------ checkpoints
 

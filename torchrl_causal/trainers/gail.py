@@ -35,15 +35,7 @@ from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.objectives import ABSORBING_KEY, add_absorbing_transitions, gail_discriminator_batch
 from torchrl_causal.trainers.base import Trainer
-from torchrl_causal.experiment.builders import (
-    TRANSITION_KEYS,
-    expert_transitions,
-    instantiate_with_strings,
-    load_or_collect_demonstrations,
-    make_imitator_env,
-    make_policy,
-    observation_dim,
-)
+from torchrl_causal.experiment.builders import TRANSITION_KEYS, instantiate_with_strings, make_imitator_env, make_policy, observation_dim
 from torchrl_causal.trainers.collection import ResumableCollector
 from torchrl_causal.experiment.device import CPU
 
@@ -75,7 +67,7 @@ class GAILTrainer(Trainer):
         self.critic_optimizer = instantiate(algo.critic_optimizer)(list(ppo.critic_network_params.flatten_keys().values()))
         self.discriminator_optimizer = instantiate(algo.discriminator_optimizer)(self.losses.discriminator.parameters())
         self.discriminator_schedule = instantiate(algo.discriminator_scheduler)(self.discriminator_optimizer)
-        self.expert = self.discriminator_rows(expert_transitions(self.window, load_or_collect_demonstrations(self.cfg))).to(self.device)
+        self.expert = self.discriminator_rows(self.expert_transitions()).to(self.device)
         self.generator = torch.Generator().manual_seed(self.cfg.seed)
         self.collector = ResumableCollector(
             self.env,

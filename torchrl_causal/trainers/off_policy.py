@@ -64,15 +64,7 @@ from torchrl.data import LazyMemmapStorage, LazyTensorStorage, TensorDictReplayB
 
 from torchrl_causal.objectives import ExpertFlaggedSACLoss, add_absorbing_transitions, eval_mode
 from torchrl_causal.trainers.base import Trainer
-from torchrl_causal.experiment.builders import (
-    TRANSITION_KEYS,
-    expert_transitions,
-    instantiate_with_strings,
-    load_or_collect_demonstrations,
-    make_imitator_env,
-    make_policy,
-    observation_dim,
-)
+from torchrl_causal.experiment.builders import TRANSITION_KEYS, instantiate_with_strings, make_imitator_env, make_policy, observation_dim
 from torchrl_causal.trainers.collection import ResumableCollector
 from torchrl_causal.experiment.device import CPU
 from torchrl_causal.experiment.run_directory import CheckpointError
@@ -158,7 +150,7 @@ class OffPolicyILTrainer(Trainer):
             raise ValueError(
                 f"algo.batch_size={algo.batch_size} x algo.expert_ratio={algo.expert_ratio} leaves an empty expert or policy half"
             )
-        demos = self._replay_format(expert_transitions(self.window, load_or_collect_demonstrations(self.cfg)))
+        demos = self._replay_format(self.expert_transitions())
         self.expert_buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(demos.numel(), device=self.device), batch_size=expert_batch)
         self.expert_buffer.extend(demos)
         self.policy_buffer = TensorDictReplayBuffer(
