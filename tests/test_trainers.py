@@ -483,6 +483,27 @@ def test_corrupted_checkpoint_is_refused_by_name(tmp_path: Path) -> None:
         run(tiny_config(tmp_path, "route_choice", "bc", True, "algo.epochs=5"))
 
 
+@pytest.mark.parametrize("by_success, selected_epoch", [(False, 4), (True, 3)])
+def test_the_best_checkpoint_is_selected_by_return_or_by_success(tmp_path: Path, by_success: bool, selected_epoch: int) -> None:
+    """Scripted train-regime scores (success, return) at epochs 1-4: the return alone picks
+    epoch 4; success first picks epoch 3, whose return breaks its tie with epoch 2."""
+    from types import SimpleNamespace
+
+    scores = iter([(0.5, -10.0), (0.9, -50.0), (0.9, -40.0), (0.8, -5.0)])
+
+    def scripted(policy):
+        success_rate, return_mean = next(scores)
+        return SimpleNamespace(success_rate=success_rate, return_mean=return_mean)
+
+    cfg = tiny_config(tmp_path, "rovermaze_u", "bc", True, "algo.epochs=4", "algo.eval_every=1", f"eval.select_by_success={by_success}")
+    window = make_window(cfg)
+    trainer = get_class(cfg.algo.trainer)(cfg, RunDirectory(cfg.run_dir), window, scripted)
+    trainer.fit()
+    assert trainer.best_progress == selected_epoch
+    best = load_checkpoint(Path(cfg.run_dir) / "checkpoints" / "best.pt")
+    assert best["progress"] == selected_epoch and (best["train_success"], best["train_return"]) == {4: (0.8, -5.0), 3: (0.9, -40.0)}[selected_epoch]
+
+
 def test_route_choice_bc_reproduces_the_appendix_values(tmp_path: Path) -> None:
     """Through the whole trainer: causal BC takes the sheltered route (3/4 in both
     regimes), non-causal BC follows the compass (11/16 at training, 19/48 deployed)."""

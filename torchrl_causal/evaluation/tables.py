@@ -181,16 +181,19 @@ def aggregate(runs: Iterable[RunRecord]) -> dict[Setting, dict[str, dict[str, Ev
 
 
 def normalised_returns(table: Table, regime: str = "deploy") -> dict[str, float]:
-    """Mean returns shifted so that the worst algorithm of ``regime`` sits at 0.
+    """Mean returns shifted so that the worst algorithm of ``regime`` sits at 0; NaN
+    (printed "—") when ``regime`` has a single algorithm, which has no worst to sit above.
 
     Examples:
         >>> r = lambda ret: {"deploy": EvaluationResult("deploy", [False], [ret], [1])}
         >>> normalised_returns({"expert": r(-104.0), "bc": r(-375.3), "c_sqil": r(-99.6)})
         {'expert': 271.3, 'bc': 0.0, 'c_sqil': 275.7}
+        >>> normalised_returns({"c_sqil": r(-99.6)})
+        {'c_sqil': nan}
     """
     means = {label: regimes[regime].return_mean for label, regimes in table.items() if regime in regimes}
-    if not means:
-        return {}
+    if len(means) < 2:
+        return {label: math.nan for label in means}
     worst = min(means.values())
     return {label: round(mean - worst, 10) for label, mean in means.items()}
 

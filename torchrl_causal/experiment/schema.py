@@ -303,6 +303,9 @@ class EvalConfig:
     final_episodes: int = at_least()
     num_envs: int = at_least()
     trajectories: int = at_least(0)
+    # Best-checkpoint selection by train-regime success, the mean return breaking ties;
+    # false: by the mean return alone (what every run before the option did).
+    select_by_success: bool = False
 
 
 @dataclass
