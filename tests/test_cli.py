@@ -14,27 +14,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from tiny_runs import tiny
 
-TINY = [
-    "env=rovermaze_u",
-    "env.horizon=40",
-    "window.k=2",
-    "algo=sqil",
-    "threads=1",
-    "demos.episodes=6",
-    "eval.episodes=4",
-    "eval.num_envs=4",
-    "eval.final_episodes=8",
-    "algo.actor.hidden=16",
-    "algo.actor.num_blocks=1",
-    "algo.critic.hidden=16",
-    "algo.critic.num_blocks=1",
-    "algo.num_envs=2",
-    "algo.frames_per_batch=40",
-    "algo.random_steps=80",
-    "algo.batch_size=32",
-    "algo.buffer_size=100000",
-]
+# No budget: the Ctrl-C test sets one long enough to interrupt; progress bars as a user gets them.
+TINY = [*tiny("sqil", "algo.buffer_size=100000"), "progress_bar=true"]
 
 
 @pytest.fixture

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
+from tiny_runs import tiny
 
 # Imported once here, before the forks. The commands' own modules (torchrl_causal.train...)
 # are not: each case runs its module as __main__, as ``python -m`` does.
@@ -43,22 +44,7 @@ import torchrl_causal.cli.status  # noqa: F401
 import torchrl_causal.cli.strength_ablation  # noqa: F401
 import torchrl_causal.cli.train  # noqa: F401
 
-TINY_BC = [
-    "env=rovermaze_u",
-    "env.horizon=40",
-    "window.k=2",
-    "algo=bc",
-    "threads=1",
-    "demos.episodes=6",
-    "eval.episodes=4",
-    "eval.num_envs=4",
-    "eval.final_episodes=8",
-    "algo.actor.hidden=16",
-    "algo.actor.num_blocks=1",
-    "algo.epochs=2",
-    "algo.eval_every=1",
-    "progress_bar=false",
-]
+TINY_BC = tiny("bc", "algo.epochs=2", "algo.eval_every=1")
 RUN = "rovermaze_u/h40-cs1.0-k2/c_bc/seed0"  # where TINY_BC's run lands below its run root
 MAX_STDERR_LINES = 3
 HYDRA_MAX_STDERR_LINES = 7  # Hydra's own report of an override it refuses: what, where, HYDRA_FULL_ERROR

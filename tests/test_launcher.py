@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from test_trainers import ALGO_TINY, TINY
+from test_trainers import TINY
+from tiny_runs import ALGO
 from torchrl_causal.evaluation import load_runs
 from torchrl_causal.experiment import load_checkpoint
 
@@ -22,7 +23,7 @@ pytest.importorskip(
 )
 
 REPO = Path(__file__).resolve().parents[1]
-SWEEP = ["-m", "env=route_choice", "algo=bc", "causal=true", "seed=0,1", *TINY, *ALGO_TINY["bc"]]
+SWEEP = ["-m", "env=route_choice", "algo=bc", "causal=true", "seed=0,1", *TINY, *ALGO["bc"]]
 
 
 def run_sweep(root: Path, *extra: str) -> None:

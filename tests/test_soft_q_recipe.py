@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from tiny_runs import tiny
 import torch
 from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
@@ -286,34 +287,15 @@ def test_the_update_sums_every_loss_term() -> None:
     assert math.isfinite(total.item())
 
 
-RECIPE_TINY = [
-    "env=rovermaze_u",
+RECIPE_TINY = tiny(
+    "sqil",
     "env.horizon=220",
-    "window.k=2",
-    "algo=sqil",
     "causal=true",
     "+recipe=goal_valued_bc_anchored",
-    "progress_bar=false",
-    "threads=1",
-    "demos.episodes=6",
-    "eval.episodes=4",
-    "eval.num_envs=4",
-    "eval.final_episodes=8",
     "eval.trajectories=2",
-    "algo.actor.hidden=16",
-    "algo.actor.num_blocks=1",
-    "algo.critic.hidden=16",
-    "algo.critic.num_blocks=1",
-    "algo.total_steps=240",
-    "algo.random_steps=80",
-    "algo.num_envs=2",
-    "algo.frames_per_batch=40",
-    "algo.batch_size=32",
-    "algo.buffer_size=1000",
-    "algo.eval_every=120",
     "algo.warm_start.bc_updates=60",
     "algo.warm_start.critic_updates=20",
-]
+)
 
 
 def test_the_recipe_warm_starts_a_run_and_fixes_its_schedule_span(tmp_path, caplog) -> None:
@@ -360,27 +342,7 @@ def test_a_shipped_policy_directory_evaluates_as_its_run(tmp_path) -> None:
     from torchrl_causal.experiment import CheckpointError, RunDirectory, compose_config
     from torchrl_causal.lifecycle import evaluate_run, run
 
-    cfg = compose_config(
-        [
-            "env=rovermaze_u",
-            "env.horizon=40",
-            "window.k=2",
-            "algo=bc",
-            f"run_root={tmp_path / 'runs'}",
-            "progress_bar=false",
-            "threads=1",
-            "demos.episodes=6",
-            "eval.episodes=4",
-            "eval.num_envs=4",
-            "eval.final_episodes=8",
-            "eval.trajectories=0",
-            "algo.actor.hidden=16",
-            "algo.actor.num_blocks=1",
-            "algo.epochs=2",
-            "algo.batch_size=64",
-            "algo.eval_every=1",
-        ]
-    )
+    cfg = compose_config(tiny("bc", f"run_root={tmp_path / 'runs'}", "eval.trajectories=0", "algo.epochs=2", "algo.eval_every=1"))
     run(cfg)
     (shipped,) = archive_runs(tmp_path / "runs", tmp_path / "policies", policies=True)
     files = sorted(str(p.relative_to(shipped)) for p in shipped.rglob("*") if p.is_file())

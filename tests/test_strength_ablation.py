@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from tiny_runs import tiny
 import torch
 
 import torchrl_causal.cli.strength_ablation as ablation
@@ -16,23 +17,7 @@ from torchrl_causal.lifecycle import run
 from torchrl_causal.experiment import compose_config
 
 EPISODES = 8
-TINY_BC = [
-    "env=rovermaze_u",
-    "env.horizon=40",
-    "window.k=2",
-    "algo=bc",
-    "progress_bar=false",
-    "threads=1",
-    "demos.episodes=6",
-    "eval.episodes=4",
-    "eval.num_envs=4",
-    "eval.final_episodes=4",
-    "algo.actor.hidden=16",
-    "algo.actor.num_blocks=1",
-    "algo.epochs=2",
-    "algo.batch_size=64",
-    "algo.eval_every=2",
-]
+TINY_BC = tiny("bc", "eval.final_episodes=4", "algo.epochs=2")
 
 
 @pytest.fixture(scope="module")

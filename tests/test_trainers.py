@@ -36,50 +36,14 @@ from torchrl_causal.experiment import (
 from torchrl_causal.experiment.builders import make_window
 from torchrl_causal.lifecycle import run
 from torchrl_causal.trainers import Trainer
+from tiny_runs import ALGO, QUICK, ROVER
 
-TINY = [
-    "progress_bar=false",
-    "threads=1",
-    "demos.episodes=6",
-    "eval.episodes=4",
-    "eval.num_envs=4",
-    "eval.final_episodes=8",
-    "eval.trajectories=2",
-]
-ALGO_TINY = {
-    "bc": ["algo.actor.hidden=16", "algo.actor.num_blocks=1", "algo.epochs=3", "algo.batch_size=64", "algo.eval_every=2"],
-    "gail": [
-        "algo.actor.hidden=16",
-        "algo.actor.num_blocks=1",
-        "algo.value.hidden=16",
-        "algo.discriminator.hidden=16",
-        "algo.rounds=2",
-        "algo.episodes_per_round=2",
-        "algo.batch_size=32",
-        "algo.discriminator_batch_size=32",
-        "algo.eval_every=1",
-    ],
-    "sqil": [
-        "algo.actor.hidden=16",
-        "algo.actor.num_blocks=1",
-        "algo.critic.hidden=16",
-        "algo.critic.num_blocks=1",
-        "algo.total_steps=240",
-        "algo.random_steps=80",
-        "algo.num_envs=2",
-        "algo.frames_per_batch=40",
-        "algo.batch_size=32",
-        "algo.buffer_size=1000",
-        "algo.eval_every=120",
-    ],
-    "expert": [],
-}
-ALGO_TINY["iq_learn"] = ALGO_TINY["sqil"] + ["algo.loss.num_value_samples=2"]
-ENV_TINY = {"rovermaze_u": ["env=rovermaze_u", "env.horizon=40", "window.k=2"], "route_choice": ["env=route_choice"]}
+TINY = [*QUICK, "eval.trajectories=2"]
+ENV_TINY = {"rovermaze_u": ROVER, "route_choice": ["env=route_choice"]}
 
 
 def tiny_config(root: Path, env: str, algo: str, causal: bool, *extra: str):
-    return compose_config([*ENV_TINY[env], f"algo={algo}", f"causal={causal}", f"run_root={root}", *TINY, *ALGO_TINY[algo], *extra])
+    return compose_config([*ENV_TINY[env], f"algo={algo}", f"causal={causal}", f"run_root={root}", *TINY, *ALGO[algo], *extra])
 
 
 def build_trainer(cfg) -> Trainer:
@@ -501,7 +465,8 @@ def test_the_best_checkpoint_is_selected_by_return_or_by_success(tmp_path: Path,
     trainer.fit()
     assert trainer.best_progress == selected_epoch
     best = load_checkpoint(Path(cfg.run_dir) / "checkpoints" / "best.pt")
-    assert best["progress"] == selected_epoch and (best["train_success"], best["train_return"]) == {4: (0.8, -5.0), 3: (0.9, -40.0)}[selected_epoch]
+    expected = {4: (0.8, -5.0), 3: (0.9, -40.0)}[selected_epoch]
+    assert best["progress"] == selected_epoch and (best["train_success"], best["train_return"]) == expected
 
 
 def test_route_choice_bc_reproduces_the_appendix_values(tmp_path: Path) -> None:

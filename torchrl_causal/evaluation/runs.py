@@ -191,8 +191,10 @@ def _complete_runs(root: Path) -> Iterator[RunDirectory]:
 
 
 #: What a selected-policy checkpoint (``checkpoints/best.pt``) holds: the actor's weights and
-#: where they were selected; no critic, optimiser or replay state.
+#: where they were selected; no critic, optimiser or replay state. ``train_success`` joined
+#: with best-checkpoint selection by success: checkpoints written before it lack it.
 POLICY_CHECKPOINT_KEYS = frozenset({"progress", "train_return", "policy"})
+POLICY_CHECKPOINT_OPTIONAL_KEYS = frozenset({"train_success"})
 
 
 def copy_selected_policy(run: RunDirectory, target: RunDirectory) -> Path:
@@ -205,7 +207,7 @@ def copy_selected_policy(run: RunDirectory, target: RunDirectory) -> Path:
     state = run.load_checkpoint(best=True)
     if state is None:
         raise CheckpointError(f"run {run.path} has no checkpoints/best.pt to ship")
-    if set(state) != POLICY_CHECKPOINT_KEYS:
+    if not POLICY_CHECKPOINT_KEYS <= set(state) <= POLICY_CHECKPOINT_KEYS | POLICY_CHECKPOINT_OPTIONAL_KEYS:
         raise CheckpointError(
             f"{run.best_checkpoint} holds {sorted(state)}, not the selected policy alone ({sorted(POLICY_CHECKPOINT_KEYS)})"
         )

@@ -1,0 +1,47 @@
+"""The smallest runs that still pass through every code path: the Hydra overrides shared by
+the tests that train. Hydra applies overrides in order, so a test adds its own after these
+and a key it names again takes the test's value."""
+
+from __future__ import annotations
+
+ROVER = ["env=rovermaze_u", "env.horizon=40", "window.k=2"]
+QUICK = ["progress_bar=false", "threads=1", "demos.episodes=6", "eval.episodes=4", "eval.num_envs=4", "eval.final_episodes=8"]
+SMALL_ACTOR = ["algo.actor.hidden=16", "algo.actor.num_blocks=1"]
+SOFT_Q = [
+    *SMALL_ACTOR,
+    "algo.critic.hidden=16",
+    "algo.critic.num_blocks=1",
+    "algo.total_steps=240",
+    "algo.random_steps=80",
+    "algo.num_envs=2",
+    "algo.frames_per_batch=40",
+    "algo.batch_size=32",
+    "algo.buffer_size=1000",
+    "algo.eval_every=120",
+]
+ALGO: dict[str, list[str]] = {
+    "bc": [*SMALL_ACTOR, "algo.epochs=3", "algo.batch_size=64", "algo.eval_every=2"],
+    "gail": [
+        *SMALL_ACTOR,
+        "algo.value.hidden=16",
+        "algo.discriminator.hidden=16",
+        "algo.rounds=2",
+        "algo.episodes_per_round=2",
+        "algo.batch_size=32",
+        "algo.discriminator_batch_size=32",
+        "algo.eval_every=1",
+    ],
+    "sqil": SOFT_Q,
+    "iq_learn": [*SOFT_Q, "algo.loss.num_value_samples=2"],
+    "expert": [],
+}
+
+
+def tiny(algo: str, *extra: str, env: list[str] = ROVER) -> list[str]:
+    """The overrides of a tiny ``algo`` run on ``env`` (RoverMaze-U, 40 steps, k = 2), then ``extra``.
+
+    Examples:
+        >>> tiny("bc", "algo.epochs=2")[:4], tiny("bc", "algo.epochs=2")[-1]
+        (['env=rovermaze_u', 'env.horizon=40', 'window.k=2', 'algo=bc'], 'algo.epochs=2')
+    """
+    return [*env, f"algo={algo}", *QUICK, *ALGO[algo], *extra]
