@@ -14,9 +14,10 @@ actor alone moves), and reports the train-regime success of the deterministic ac
         --demos runs/recipe/_demos/antmaze_medium-h1000-cs1.0-n200-s0 --run-root /tmp/dip
 
 Variants: ``critics_only`` (the actor held), ``anchor_actor_loss`` (the anchor scaled by
-``|loss_actor|``, the recipe's first version), ``anchor_expert_value`` (scaled by
-``r_E / (1 - gamma)``, the recipe now), ``anchor_expert_value_x6`` (weight 2.5 instead of
-0.4), ``no_anchor``, ``actor_lr_div10`` (the first version with the actor's learning rate / 10).
+``|loss_actor|``: the recipe, ``algo.loss.bc_scale=actor_loss``), ``anchor_expert_value``
+(scaled by the constant ``r_E / (1 - gamma)``: holds the cloned actor here, but a full run ends
+lower, results/antmaze_medium_recipe.md), ``anchor_expert_value_x6`` (weight 2.5 instead of
+0.4), ``no_anchor``, ``actor_lr_div10`` (the recipe with the actor's learning rate / 10).
 """
 
 from __future__ import annotations
