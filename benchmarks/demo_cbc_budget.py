@@ -2,11 +2,17 @@
 
 Runs the demo's C-BC (:func:`torchrl_causal.cli.demo.demo_overrides`, ``algo=bc causal=true``)
 once per ``--seeds`` seed and ``--variants`` variant, the variant's overrides after the demo's
-(Hydra applies the later value), each variant in its own run root under ``--root`` (its first
-run collects the demo's 200 demonstrations, the same set for every seed), and prints the final
-train / deploy success per variant and seed.
+(Hydra applies the later value), each variant in its own run root under ``--root``, every run on
+the demonstration set ``--demos`` (``demos.path``), and prints the final train / deploy success
+per variant and seed.
 
-    OMP_NUM_THREADS=1 python benchmarks/demo_cbc_budget.py --root /tmp/cbc_budget --seeds 0 1 2 3
+    OMP_NUM_THREADS=1 python benchmarks/demo_cbc_budget.py --root /tmp/cbc_budget --seeds 0 1 2 3 \
+        --demos /tmp/demo_seeds/seed0/_demos/rovermaze_u-h400-cs1.0-n200-s0
+
+``--demos`` is the set ``make demo`` collects (its expert run, seed 0; here the one
+``benchmarks/demo_seed_spread.py`` collected for seed 0). Name it: a collected set depends on
+torch's global random state when it is collected (the expert's noise generator is seeded from
+it), so a set collected by a BC run differs from the demo's.
 
 The question it answered (issue 41): why the demo's claim "BC within 10 points of C-BC (train)"
 failed in one seed of four. Results: ``results/demo_seed_spread.md``.
@@ -40,11 +46,18 @@ def main() -> None:
     parser.add_argument("--root", required=True, type=Path)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    parser.add_argument("--demos", required=True, type=Path, help="a collected demonstration set (demos.path)")
     args = parser.parse_args()
     print("| variant | seed | train success % | deploy success % |\n|---|---|---|---|", flush=True)
     for name in args.variants:
         for seed in args.seeds:
-            overrides = [*demo_overrides("bc", True, args.root / name), *VARIANTS[name], f"seed={seed}", "progress_bar=false"]
+            overrides = [
+                *demo_overrides("bc", True, args.root / name),
+                *VARIANTS[name],
+                f"seed={seed}",
+                f"demos.path={args.demos}",
+                "progress_bar=false",
+            ]
             results = run(compose_config(overrides))
             train, deploy = results["train"].success_rate, results["deploy"].success_rate
             print(f"| {name} | {seed} | {100 * train:.1f} | {100 * deploy:.1f} |", flush=True)
