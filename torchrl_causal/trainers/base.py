@@ -255,7 +255,12 @@ class Trainer(ABC):
         if self._selection_key(result.success_rate, result.return_mean) > self._selection_key(self.best_success, self.best_return):
             self.best_return, self.best_success, self.best_progress = result.return_mean, result.success_rate, self.progress
             self.run.save_checkpoint(
-                {"progress": self.progress, "train_return": result.return_mean, "train_success": result.success_rate, "policy": self.policy.state_dict()},
+                {
+                    "progress": self.progress,
+                    "train_return": result.return_mean,
+                    "train_success": result.success_rate,
+                    "policy": self.policy.state_dict(),
+                },
                 best=True,
             )
         self.save_checkpoint()
