@@ -168,7 +168,7 @@ class Trainer(ABC):
 
     # ------------------------------------------------------------------ shared by the loops
 
-    def expert_transitions(self) -> TensorDict:
+    def demonstration_transitions(self) -> TensorDict:
         """The run's demonstrations (loaded, or collected once) as transitions on the run's
         adjustment window: what the imitators that learn from expert transitions read."""
         return expert_transitions(self.window, load_or_collect_demonstrations(self.cfg))

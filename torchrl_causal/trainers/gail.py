@@ -67,7 +67,7 @@ class GAILTrainer(Trainer):
         self.critic_optimizer = instantiate(algo.critic_optimizer)(list(ppo.critic_network_params.flatten_keys().values()))
         self.discriminator_optimizer = instantiate(algo.discriminator_optimizer)(self.losses.discriminator.parameters())
         self.discriminator_schedule = instantiate(algo.discriminator_scheduler)(self.discriminator_optimizer)
-        self.expert = self.discriminator_rows(self.expert_transitions()).to(self.device)
+        self.expert = self.discriminator_rows(self.demonstration_transitions()).to(self.device)
         self.generator = torch.Generator().manual_seed(self.cfg.seed)
         self.collector = ResumableCollector(
             self.env,

@@ -150,7 +150,7 @@ class OffPolicyILTrainer(Trainer):
             raise ValueError(
                 f"algo.batch_size={algo.batch_size} x algo.expert_ratio={algo.expert_ratio} leaves an empty expert or policy half"
             )
-        demos = self._replay_format(self.expert_transitions())
+        demos = self._replay_format(self.demonstration_transitions())
         self.expert_buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(demos.numel(), device=self.device), batch_size=expert_batch)
         self.expert_buffer.extend(demos)
         self.policy_buffer = TensorDictReplayBuffer(
