@@ -1,7 +1,8 @@
 """How much the demo's figures and claim margins move with the seed (issue 41, item 6).
 
 Runs ``make demo``'s five runs (the same overrides, :data:`torchrl_causal.cli.demo.DEMO_RUNS`)
-once per ``--seeds`` seed, each seed in its own run root, ``--workers`` runs at a time, then
+once per ``--seeds`` seed with ``seed=S demos.seed=S`` (a machine with another CPU draws other
+demonstrations and other training draws, so both move), each seed in its own run root, ``--workers`` runs at a time, then
 prints per seed the deploy / train success of every row and each claim check's margin (the
 measured value minus the threshold, in points; negative fails), and the spread over seeds.
 
@@ -33,14 +34,14 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
     jobs = [
-        [*demo_overrides(algo, causal, args.root / f"seed{seed}"), f"seed={seed}"]
+        [*demo_overrides(algo, causal, args.root / f"seed{seed}"), f"seed={seed}", f"demos.seed={seed}"]
         for seed in args.seeds
         for algo, causal in DEMO_RUNS
         if algo == "expert"
     ]
     run_in_processes(run_overrides, jobs, args.workers)  # the experts first: their demonstrations feed the rest
     jobs = [
-        [*demo_overrides(algo, causal, args.root / f"seed{seed}"), f"seed={seed}"]
+        [*demo_overrides(algo, causal, args.root / f"seed{seed}"), f"seed={seed}", f"demos.seed={seed}"]
         for seed in args.seeds
         for algo, causal in DEMO_RUNS
         if algo != "expert"

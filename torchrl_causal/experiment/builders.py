@@ -186,8 +186,9 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
 
     The set must have been recorded in this config's train-regime env (same maze,
     horizon, strength): :func:`~torchrl_causal.data.sources.load_source` refuses others.
-    Collection is atomic, so runs started side by side may both collect; one identical
-    set wins and the other run loads it. Collection leaves torch's random state as it
+    The set is a function of the config alone (``demos.seed`` seeds the env and the
+    expert's noise), so runs started side by side that both collect it write the same set;
+    collection is atomic and one copy wins. Collection leaves torch's random state as it
     found it, so a run that collects the set trains exactly as one that loads it.
     """
     from torchrl_causal.data import collect_demonstrations, successful_episodes
@@ -199,10 +200,13 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
     if minari_reference(cfg.demos.source) is None and not path.exists():
         episodes = cfg.demos.episodes
         env = make_env(cfg, "train", min(episodes, 64), cfg.demos.seed)
-        # The expert seeds itself from the global generator: without the fork, whether this
-        # run or another collected the set would change every later draw of the training.
+        # The expert's noise seeds itself from the global generator. Seeding it from
+        # demos.seed makes the set a function of the config alone (not of the training seed
+        # or of what the run drew before), and the fork leaves the run's own draws as they
+        # were, so whether this run or another collected the set changes nothing later.
         try:
             with torch.random.fork_rng():
+                torch.manual_seed(cfg.demos.seed)
                 collect_demonstrations(env, make_expert(cfg, env), episodes, path, seed=cfg.demos.seed, progress=cfg.progress_bar)
         except OSError:
             if not path.exists():
