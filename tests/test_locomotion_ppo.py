@@ -1,0 +1,102 @@
+"""The walking-skill PPO trainer: its normaliser, the folded export, a tiny humanoid run and its resume.
+
+Budgets are tiny (hidden 16, 4 envs x 16 steps); the checks are closed forms (merged statistics,
+folded layers), counts that follow from the config, and what travels in the resume state.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+from tensordict import TensorDict
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+from torchrl_causal.envs.locomotion import SKILLS, make_locomotion_actor
+from torchrl_causal.envs.locomotion_ppo import (
+    PPOLocomotionConfig,
+    RunningNormalisation,
+    fold_observation_normalisation,
+    make_ppo_actor,
+    train_locomotion_ppo,
+)
+
+FRAMES = 4 * 16
+
+
+def _config(total_steps: int, **changes) -> PPOLocomotionConfig:
+    base = {"num_envs": 4, "rollout_steps": 16, "minibatch_size": 32, "epochs": 2, "hidden": 16, "eval_every": 2 * FRAMES}
+    return PPOLocomotionConfig(total_steps=total_steps, eval_envs=2, eval_steps=10, **{**base, **changes})
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_merged_statistics_are_those_of_all_the_data(seed: int) -> None:
+    generator = torch.Generator().manual_seed(seed)
+    data = torch.randn(300, 3, generator=generator) * torch.tensor([1.0, 10.0, 0.1]) + torch.tensor([5.0, -2.0, 0.0])
+    cuts = sorted(torch.randint(1, 299, (3,), generator=generator).tolist())
+    norm = RunningNormalisation(3)
+    for part in torch.tensor_split(data, cuts):
+        if len(part):
+            norm.update(part)
+    assert int(norm.count) == 300
+    torch.testing.assert_close(norm.mean, data.mean(0), rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(norm.var, data.var(0, unbiased=False), rtol=1e-4, atol=1e-5)
+
+
+def test_the_folded_body_acts_as_the_ppo_actor_and_loads_into_the_skill_network() -> None:
+    skill = SKILLS["humanoid"]
+    norm, body = RunningNormalisation(skill.observation_dim), skill.network(32)
+    norm.update(torch.randn(500, skill.observation_dim) * 4 + 2)
+    observation = TensorDict(observation=torch.randn(7, skill.observation_dim) * 4 + 2, batch_size=[7])
+    shipped = skill.network(32)  # what the maze expert builds before loading the weights
+    shipped.load_state_dict(fold_observation_normalisation(norm, body).state_dict())
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        ppo_action = make_ppo_actor(body, norm)(observation.clone())["action"]
+        sac_action = make_locomotion_actor(shipped)(observation.clone())["action"]
+    torch.testing.assert_close(ppo_action, sac_action, atol=1e-5, rtol=1e-5)
+    assert torch.equal(shipped[2].weight, body[2].weight)  # only the first layer changes
+
+
+def test_a_run_resumes_from_its_small_state_on_another_machine(tmp_path) -> None:
+    first = train_locomotion_ppo(tmp_path / "a", _config(2 * FRAMES), output=tmp_path / "a.pt", progress_bar=False)
+    assert first["steps"] == 2 * FRAMES and (tmp_path / "a.pt").exists()
+    state_file = tmp_path / "a" / "resume_state.pt"
+    state = torch.load(state_file, weights_only=True)
+    assert state["algorithm"] == "ppo" and state["counters"]["iterations"] == 2 and state["optimizer"]["state"]
+    means = [key for key in state["loss"] if key.endswith(".count")]
+    assert means and all(int(state["loss"][key]) == 2 * FRAMES for key in means)  # the normaliser travels
+    assert set(state["best_body"]) == set(SKILLS["humanoid"].network(16).state_dict())
+
+    second = train_locomotion_ppo(tmp_path / "b", _config(3 * FRAMES), resume_from=state_file, progress_bar=False)
+    assert second["steps"] == 3 * FRAMES
+    resumed = torch.load(tmp_path / "b" / "resume_state.pt", weights_only=True)
+    assert resumed["counters"]["iterations"] == 3 and resumed["counters"]["collect_seed"] == state["counters"]["collect_seed"] + 1
+    assert all(int(resumed["loss"][key]) == 3 * FRAMES for key in means)
+    weight = next(key for key in state["loss"] if key.endswith("weight"))
+    assert not torch.equal(resumed["loss"][weight], state["loss"][weight])  # it kept learning
+    # The same directory continues from its own state; a finished budget trains nothing more.
+    again = train_locomotion_ppo(tmp_path / "b", _config(3 * FRAMES), progress_bar=False)
+    assert again["steps"] == 3 * FRAMES
+    assert json.loads((tmp_path / "b" / "ppo_config.json").read_text())["num_envs"] == 4
+
+
+def test_resume_refuses_another_config_or_a_sac_state(tmp_path) -> None:
+    train_locomotion_ppo(tmp_path / "a", _config(FRAMES), progress_bar=False)
+    state_file = tmp_path / "a" / "resume_state.pt"
+    with pytest.raises(ValueError, match=r"changed: \['clip_epsilon'\]"):
+        train_locomotion_ppo(tmp_path / "b", _config(2 * FRAMES, clip_epsilon=0.1), resume_from=state_file, progress_bar=False)
+    sac_state = tmp_path / "sac.pt"
+    torch.save({"progress": 200, "skill": "humanoid", "config": {}, "loss": {}}, sac_state)  # a SAC resume state has no "algorithm"
+    with pytest.raises(ValueError, match="not PPO's 'humanoid'"):
+        train_locomotion_ppo(tmp_path / "c", _config(FRAMES), resume_from=sac_state, progress_bar=False)
+    assert not SKILLS["humanoid"].weights.exists()  # output=None by default: the shipped weights are untouched
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [({"num_envs": 0}, "num_envs must be >= 1"), ({"minibatch_size": 10_000}, "exceeds a batch"), ({"gamma": 1.0}, "0 < gamma < 1")],
+)
+def test_bad_configs_are_refused_in_one_line(change, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        _config(FRAMES, **change)

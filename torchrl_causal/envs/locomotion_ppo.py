@@ -1,0 +1,425 @@
+"""PPO for the walking skills: many batched simulations, on-policy, weights-only resume.
+
+Issue 38's fallback for the humanoid's skill. SAC (:mod:`torchrl_causal.envs.locomotion`) is
+bound by its updates on one CPU core (~75 env steps/s at 0.5 updates per step, 2 x 256), so its
+3M-step budget is ~11 core-hours; PPO's cost is the simulation's (a 4096-step batch is ~1.5 s of
+MuJoCo and ~0.1 s of updates at 2 x 256), tens of times more env steps per core-hour, which is
+what a standing-start humanoid needs (OGBench's SAC skill used 40M). On-policy also makes the
+resume across machines exact: the learner's weights, normaliser and optimiser are the whole state.
+
+The policy is the skill's body (:func:`~torchrl_causal.envs.open_ground.make_skill_network`) on
+running-normalised observations, a Gaussian around ``tanh`` of its first half of outputs with the
+second half's softplus as the scale; the env clips the sampled action to ``[-1, 1]``. Its
+deterministic action is therefore ``tanh`` of the body's first half, as the SAC skill's, and the
+exported body has the normaliser folded into its first layer
+(:func:`fold_observation_normalisation`): the shipped weights load into the same network as
+SAC's, and :class:`~torchrl_causal.envs.HumanoidMazeExpert` uses them unchanged.
+
+TorchRL parts: :class:`~torchrl.collectors.Collector` over the batched env,
+:class:`~torchrl.objectives.value.GAE`, :class:`~torchrl.objectives.ClipPPOLoss`. Rewards are
+scaled by ``reward_scale`` for the critic (the stand reward is up to 2.5 per step). Every
+``checkpoint_minutes`` and every evaluation ``<run_dir>/resume_state.pt`` is written (a few MB);
+the same command resumes from it, on this machine or (``--resume-from``) another::
+
+    python -m torchrl_causal.envs.locomotion_ppo --skill humanoid --run-dir runs/humanoid_ppo
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import logging
+import math
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictSequential
+from torch import nn
+from torchrl.collectors import Collector
+from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOperator
+from torchrl.objectives import ClipPPOLoss
+from torchrl.objectives.value import GAE
+from torchrl.record.loggers.csv import CSVLogger
+
+from torchrl_causal.envs.locomotion import SKILLS, LocomotionSkill, evaluate_locomotion
+from torchrl_causal.experiment.run_directory import atomic_save, load_checkpoint
+from torchrl_causal.progress import progress
+
+__all__ = [
+    "PPOLocomotionConfig",
+    "RunningNormalisation",
+    "fold_observation_normalisation",
+    "make_ppo_actor",
+    "train_locomotion_ppo",
+]
+
+log = logging.getLogger(__name__)
+
+_RESUME_STATE = "resume_state.pt"
+_CONFIG = "ppo_config.json"
+_BEST_BODY = "best_body.pt"
+
+
+@dataclass(frozen=True)
+class PPOLocomotionConfig:
+    """Budget and hyperparameters of a PPO skill run (MuJoCo-PPO defaults: clip 0.2, GAE 0.95).
+
+    One iteration collects ``rollout_steps`` steps in each of ``num_envs`` simulations, then
+    makes ``epochs`` passes over them in minibatches of ``minibatch_size``.
+    """
+
+    total_steps: int = 30_000_000
+    num_envs: int = 64
+    rollout_steps: int = 64
+    epochs: int = 4
+    minibatch_size: int = 1024
+    gamma: float = 0.99
+    lmbda: float = 0.95
+    clip_epsilon: float = 0.2
+    entropy_coeff: float = 1e-3
+    critic_coeff: float = 0.5
+    lr: float = 3e-4
+    max_grad_norm: float = 0.5
+    reward_scale: float = 0.1
+    hidden: int = 256
+    eval_every: int = 500_000
+    eval_envs: int = 8
+    eval_steps: int = 400
+    checkpoint_minutes: float = 10.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in (
+            "total_steps",
+            "num_envs",
+            "rollout_steps",
+            "epochs",
+            "minibatch_size",
+            "hidden",
+            "eval_every",
+            "eval_envs",
+            "eval_steps",
+        ):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.minibatch_size > self.frames_per_batch:
+            raise ValueError(
+                f"minibatch_size ({self.minibatch_size}) exceeds a batch of num_envs x rollout_steps = {self.frames_per_batch}"
+            )
+        if not 0 < self.gamma < 1 or not 0 <= self.lmbda <= 1 or not 0 < self.clip_epsilon < 1:
+            raise ValueError(
+                f"need 0 < gamma < 1, 0 <= lmbda <= 1, 0 < clip_epsilon < 1, got {self.gamma}, {self.lmbda}, {self.clip_epsilon}"
+            )
+        if not (self.lr > 0 and self.max_grad_norm > 0 and self.reward_scale > 0 and self.entropy_coeff >= 0 and self.critic_coeff > 0):
+            raise ValueError("lr, max_grad_norm, reward_scale and critic_coeff must be > 0 and entropy_coeff >= 0")
+
+    @property
+    def frames_per_batch(self) -> int:
+        return self.num_envs * self.rollout_steps
+
+
+#: Fields a continued run may change: the budget, and when and how much it evaluates and saves.
+_BOOKKEEPING = frozenset({"total_steps", "eval_every", "eval_envs", "eval_steps", "checkpoint_minutes"})
+
+
+class RunningNormalisation(nn.Module):
+    """``(x - mean) / sqrt(var + eps)`` with the mean and variance of every observation seen.
+
+    The statistics are buffers (saved with the module) updated by :meth:`update` with a batch
+    (Chan et al.'s parallel merge), never by gradients.
+
+    Examples:
+        >>> norm = RunningNormalisation(2)
+        >>> norm.update(torch.tensor([[0.0, 10.0], [2.0, 30.0]]))
+        >>> norm(torch.tensor([[1.0, 20.0]]))
+        tensor([[0., 0.]])
+        >>> norm.mean.tolist(), norm.var.tolist()
+        ([1.0, 20.0], [1.0, 100.0])
+    """
+
+    mean: torch.Tensor
+    var: torch.Tensor
+    count: torch.Tensor
+
+    def __init__(self, dim: int, eps: float = 1e-8) -> None:
+        super().__init__()
+        self.eps = eps
+        self.register_buffer("mean", torch.zeros(dim))
+        self.register_buffer("var", torch.ones(dim))
+        self.register_buffer("count", torch.zeros((), dtype=torch.float64))
+
+    @torch.no_grad()
+    def update(self, batch: torch.Tensor) -> None:
+        batch = batch.reshape(-1, self.mean.shape[0]).double()
+        n = batch.shape[0]
+        mean, var = batch.mean(0), batch.var(0, unbiased=False)
+        total = self.count + n
+        delta = mean - self.mean.double()
+        new_mean = self.mean.double() + delta * n / total
+        merged = (self.var.double() * self.count + var * n + delta.square() * self.count * n / total) / total
+        self.mean.copy_(new_mean.float())
+        self.var.copy_(merged.float())
+        self.count.copy_(total)
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        return (observation - self.mean) / torch.sqrt(self.var + self.eps)
+
+
+def fold_observation_normalisation(norm: RunningNormalisation, body: nn.Module) -> nn.Sequential:
+    """A copy of ``body`` whose first :class:`~torch.nn.Linear` reads raw observations:
+    ``folded(x) == body(norm(x))`` (``W' = W / s``, ``b' = b - W' mean``, ``s = sqrt(var + eps)``).
+
+    Examples:
+        >>> from torchrl_causal.envs.open_ground import make_skill_network
+        >>> norm, body = RunningNormalisation(4), make_skill_network(4, 2, hidden=8)
+        >>> norm.update(torch.randn(100, 4) * 3 + 1)
+        >>> x = torch.randn(5, 4)
+        >>> torch.allclose(fold_observation_normalisation(norm, body)(x), body(norm(x)), atol=1e-5)
+        True
+    """
+    layers = [copy.deepcopy(layer) for layer in body.children()] if isinstance(body, nn.Sequential) else []
+    first = layers[0] if layers else None
+    if not isinstance(first, nn.Linear):
+        raise TypeError(f"the body must be an nn.Sequential starting with nn.Linear, got {body}")
+    scale = torch.sqrt(norm.var + norm.eps)
+    linear = nn.Linear(first.in_features, first.out_features)
+    with torch.no_grad():
+        linear.weight.copy_(first.weight / scale)
+        linear.bias.copy_(first.bias - linear.weight @ norm.mean)
+    return nn.Sequential(linear, *layers[1:])  # the same layers, so the same state-dict keys
+
+
+class _TanhMean(nn.Module):
+    def forward(self, loc: torch.Tensor) -> torch.Tensor:
+        return torch.tanh(loc)
+
+
+def make_ppo_actor(body: nn.Module, norm: RunningNormalisation) -> ProbabilisticActor:
+    """The PPO policy: ``Normal(tanh(loc), scale)`` with ``(loc, scale)`` from ``body(norm(obs))``.
+
+    Its deterministic action is ``tanh(loc)``; sampled actions are not clipped here (the env
+    clips), so their log-probability is the Gaussian's, as PPO's ratio needs.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> from torchrl_causal.envs.open_ground import make_skill_network
+        >>> actor = make_ppo_actor(make_skill_network(6, 3, hidden=8), RunningNormalisation(6))
+        >>> out = actor(TensorDict(observation=torch.zeros(2, 6), batch_size=[2]))
+        >>> out["action"].shape, out["action_log_prob"].shape
+        (torch.Size([2, 3]), torch.Size([2]))
+    """
+    params = TensorDictModule(nn.Sequential(norm, body, NormalParamExtractor()), in_keys=["observation"], out_keys=["loc", "scale"])
+    mean = TensorDictModule(_TanhMean(), in_keys=["loc"], out_keys=["loc"])
+    return ProbabilisticActor(
+        TensorDictSequential(params, mean),
+        in_keys=["loc", "scale"],
+        out_keys=["action"],
+        distribution_class=IndependentNormal,
+        return_log_prob=True,
+        log_prob_key="action_log_prob",
+    )
+
+
+def _make_value(skill: LocomotionSkill, norm: RunningNormalisation, hidden: int) -> ValueOperator:
+    network = MLP(in_features=skill.observation_dim, out_features=1, num_cells=[hidden, hidden], activation_class=nn.Tanh)
+    return ValueOperator(nn.Sequential(norm, network), in_keys=["observation"])
+
+
+def _check_same_config(saved: dict[str, Any], config: PPOLocomotionConfig, where: str | Path) -> None:
+    defaults = asdict(PPOLocomotionConfig())
+    changed = sorted(k for k, v in asdict(config).items() if k not in _BOOKKEEPING and saved.get(k, defaults[k]) != v)
+    if changed:
+        raise ValueError(f"{where} was trained with another config (changed: {changed}); use a new --run-dir or the same settings")
+
+
+def train_locomotion_ppo(
+    run_dir: str | Path,
+    config: PPOLocomotionConfig = PPOLocomotionConfig(),
+    *,
+    skill: str | LocomotionSkill = "humanoid",
+    output: str | Path | None = None,
+    resume_from: str | Path | None = None,
+    progress_bar: bool = True,
+) -> dict[str, Any]:
+    """Trains (or resumes) a skill with PPO in ``run_dir``; exports the best folded body to ``output``.
+
+    A ``run_dir`` holding a ``resume_state.pt`` continues from it; otherwise ``resume_from`` (a
+    ``resume_state.pt`` from another machine) starts it. A run made with another config is
+    refused (the changed fields are named). The best evaluation (speed along the command) keeps
+    its folded body in ``<run_dir>/best_body.pt``. Returns the final record.
+    """
+    skill = SKILLS[skill] if isinstance(skill, str) else skill
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    config_path = run_dir / _CONFIG
+    if config_path.exists():
+        _check_same_config(json.loads(config_path.read_text()), config, run_dir)
+    torch.manual_seed(config.seed)
+
+    norm = RunningNormalisation(skill.observation_dim)
+    body = skill.network(config.hidden)
+    actor = make_ppo_actor(body, norm)
+    value = _make_value(skill, norm, config.hidden)
+    loss = ClipPPOLoss(
+        actor,
+        value,
+        clip_epsilon=config.clip_epsilon,
+        entropy_bonus=config.entropy_coeff > 0,
+        entropy_coeff=config.entropy_coeff,
+        critic_coeff=config.critic_coeff,
+        loss_critic_type="l2",
+        normalize_advantage=True,
+    )
+    loss.set_keys(sample_log_prob="action_log_prob")
+    advantage = GAE(gamma=config.gamma, lmbda=config.lmbda, value_network=value, average_gae=False)
+    optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
+    counters: dict[str, Any] = {"steps": 0, "iterations": 0, "best_speed": -math.inf, "collect_seed": config.seed}
+
+    state_path = run_dir / _RESUME_STATE
+    source = state_path if state_path.exists() else (Path(resume_from) if resume_from is not None else None)
+    if source is not None:
+        state = load_checkpoint(source)
+        if state.get("skill") != skill.name or state.get("algorithm") != "ppo":
+            raise ValueError(f"{source} holds a {state.get('algorithm')!r} {state.get('skill')!r} skill, not PPO's {skill.name!r}")
+        _check_same_config(state["config"], config, source)
+        loss.load_state_dict(state["loss"])
+        optimizer.load_state_dict(state["optimizer"])
+        counters.update(state["counters"])
+        if "best_body" in state and source != state_path:
+            atomic_save(state["best_body"], run_dir / _BEST_BODY)
+        log.info("[%s ppo] resumed at %d env steps from %s", skill.name, counters["steps"], source)
+    config_path.write_text(json.dumps(asdict(config), indent=2))
+
+    def save() -> None:
+        best = run_dir / _BEST_BODY
+        state = {
+            "progress": counters["steps"],
+            "algorithm": "ppo",
+            "skill": skill.name,
+            "config": asdict(config),
+            "loss": loss.state_dict(),
+            "optimizer": optimizer.state_dict(),
+            "counters": dict(counters),
+        }
+        if best.exists():
+            state["best_body"] = torch.load(best, weights_only=True)
+        atomic_save(state, state_path)
+
+    def evaluate() -> dict[str, float]:
+        folded = fold_observation_normalisation(norm, body)
+        result = evaluate_locomotion(folded, skill=skill, envs=config.eval_envs, steps=config.eval_steps)
+        if result["speed"] > counters["best_speed"]:
+            counters["best_speed"] = result["speed"]
+            atomic_save(folded.state_dict(), run_dir / _BEST_BODY)
+        return result
+
+    logger = CSVLogger(exp_name="ppo", log_dir=str(run_dir / "logs"))
+    remaining = config.total_steps - counters["steps"]
+    if remaining > 0:
+        # A resumed run draws fresh episodes from a new seed (the simulations are not saved).
+        counters["collect_seed"] += 1
+        env = skill.make_env(config.num_envs, counters["collect_seed"])
+        collector = Collector(
+            env,
+            actor,
+            frames_per_batch=config.frames_per_batch,
+            total_frames=math.ceil(remaining / config.frames_per_batch) * config.frames_per_batch,
+            device="cpu",
+            auto_register_policy_transforms=False,
+        )
+        bar = progress(config.total_steps, f"{skill.name} ppo", "env steps", enabled=progress_bar, initial=counters["steps"])
+        last_save = time.monotonic()
+        for batch in collector:
+            metrics = _update(batch, loss, advantage, optimizer, config)
+            # The statistics move after the update, so each batch is collected and learned with the same ones.
+            norm.update(batch["observation"])
+            counters["steps"] += batch.numel()
+            counters["iterations"] += 1
+            collector.update_policy_weights_()
+            steps = counters["steps"]
+            metrics["train_reward"] = batch["next", "reward"].mean().item()
+            metrics["fall_rate_per_step"] = batch["next", "terminated"].float().mean().item()
+            if steps % config.eval_every < config.frames_per_batch or steps >= config.total_steps:
+                metrics.update({f"eval_{k}": v for k, v in evaluate().items()})
+                save()
+                last_save = time.monotonic()
+            elif time.monotonic() - last_save > 60 * config.checkpoint_minutes:
+                save()
+                last_save = time.monotonic()
+            for name, number in metrics.items():
+                logger.log_scalar(name, number, step=steps)
+            bar.update(batch.numel())
+            bar.set_postfix({k: f"{v:.3g}" for k, v in metrics.items() if k in ("train_reward", "eval_speed", "eval_fall_rate")})
+            if steps >= config.total_steps:
+                break
+        bar.close()
+        collector.shutdown()
+        save()
+    record = {"skill": skill.name, "algorithm": "ppo", "steps": counters["steps"], "best_eval_speed": counters["best_speed"]}
+    if output is not None and (run_dir / _BEST_BODY).exists():
+        output = Path(output)
+        output.parent.mkdir(parents=True, exist_ok=True)
+        atomic_save(torch.load(run_dir / _BEST_BODY, weights_only=True), output)
+        record["exported"] = str(output)
+    (run_dir / "result.json").write_text(json.dumps(record, indent=2))
+    return record
+
+
+def _update(
+    batch: TensorDictBase, loss: ClipPPOLoss, advantage: GAE, optimizer: torch.optim.Optimizer, config: PPOLocomotionConfig
+) -> dict[str, float]:
+    """``epochs`` passes of clipped-PPO minibatch updates over one collected batch."""
+    batch = batch.clone()
+    batch.set(("next", "reward"), batch.get(("next", "reward")) * config.reward_scale)
+    with torch.no_grad():
+        advantage(batch)  # over [num_envs, rollout_steps]: the time axis is the last one
+    flat = batch.reshape(-1)
+    totals: dict[str, float] = {}
+    count = 0
+    for _ in range(config.epochs):
+        for indices in torch.randperm(flat.shape[0]).split(config.minibatch_size):
+            losses = loss(flat[indices])
+            total = losses["loss_objective"] + losses["loss_critic"] + losses.get("loss_entropy", torch.zeros(()))
+            optimizer.zero_grad(set_to_none=True)
+            total.backward()
+            nn.utils.clip_grad_norm_(loss.parameters(), config.max_grad_norm)
+            optimizer.step()
+            for key in ("loss_objective", "loss_critic", "clip_fraction", "kl_approx"):
+                if key in losses.keys():
+                    totals[key] = totals.get(key, 0.0) + losses[key].detach().mean().item()
+            count += 1
+    return {key: value / count for key, value in totals.items()}
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--skill", choices=sorted(SKILLS), default="humanoid")
+    parser.add_argument("--run-dir", default=None, help="resume state and logs (resumed); default runs/<skill>_ppo")
+    parser.add_argument("--resume-from", default=None, help="a resume_state.pt to start an empty --run-dir from")
+    parser.add_argument("--steps", type=int, default=None, help="total env steps (default 30M)")
+    parser.add_argument("--num-envs", type=int, default=None)
+    parser.add_argument("--eval-every", type=int, default=None, help="env steps between evaluations (and resume states)")
+    parser.add_argument("--seed", type=int, default=None)
+    parser.add_argument(
+        "--output", default=None, help="where the best folded policy body is exported (default: the skill's weights in the package)"
+    )
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (one is fastest on small CPUs)")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
+    torch.set_num_threads(args.threads)
+    skill = SKILLS[args.skill]
+    overrides = {"total_steps": args.steps, "num_envs": args.num_envs, "eval_every": args.eval_every, "seed": args.seed}
+    config = replace(PPOLocomotionConfig(), **{k: v for k, v in overrides.items() if v is not None})
+    record = train_locomotion_ppo(
+        args.run_dir or f"runs/{skill.name}_ppo", config, skill=skill, output=args.output or skill.weights, resume_from=args.resume_from
+    )
+    print(json.dumps(record))
+
+
+if __name__ == "__main__":
+    main()
