@@ -344,6 +344,7 @@ def train_locomotion_ppo(
             steps = counters["steps"]
             metrics["train_reward"] = batch["next", "reward"].mean().item()
             metrics["fall_rate_per_step"] = batch["next", "terminated"].float().mean().item()
+            metrics["policy_scale"] = batch["scale"].mean().item()  # exploration noise (actions span [-1, 1])
             if steps % config.eval_every < config.frames_per_batch or steps >= config.total_steps:
                 metrics.update({f"eval_{k}": v for k, v in evaluate().items()})
                 save()
@@ -403,6 +404,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--resume-from", default=None, help="a resume_state.pt to start an empty --run-dir from")
     parser.add_argument("--steps", type=int, default=None, help="total env steps (default 30M)")
     parser.add_argument("--num-envs", type=int, default=None)
+    parser.add_argument("--rollout-steps", type=int, default=None, help="steps per env per iteration (default 64)")
+    parser.add_argument("--epochs", type=int, default=None, help="passes over each batch (default 4)")
+    parser.add_argument("--minibatch-size", type=int, default=None, help="default 1024")
     parser.add_argument("--eval-every", type=int, default=None, help="env steps between evaluations (and resume states)")
     parser.add_argument("--seed", type=int, default=None)
     parser.add_argument(
@@ -413,7 +417,15 @@ def main(argv: list[str] | None = None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     torch.set_num_threads(args.threads)
     skill = SKILLS[args.skill]
-    overrides = {"total_steps": args.steps, "num_envs": args.num_envs, "eval_every": args.eval_every, "seed": args.seed}
+    overrides = {
+        "total_steps": args.steps,
+        "num_envs": args.num_envs,
+        "rollout_steps": args.rollout_steps,
+        "epochs": args.epochs,
+        "minibatch_size": args.minibatch_size,
+        "eval_every": args.eval_every,
+        "seed": args.seed,
+    }
     config = replace(PPOLocomotionConfig(), **{k: v for k, v in overrides.items() if v is not None})
     record = train_locomotion_ppo(
         args.run_dir or f"runs/{skill.name}_ppo", config, skill=skill, output=args.output or skill.weights, resume_from=args.resume_from
