@@ -36,7 +36,7 @@ import math
 import shutil
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, TypedDict
@@ -61,12 +61,17 @@ from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv, make_skill
 from torchrl_causal.experiment.run_directory import atomic_save, load_checkpoint
 
 __all__ = [
+    "BEST_BODY",
+    "BOOKKEEPING",
     "SKILLS",
     "SKILL_WEIGHTS",
     "LocomotionConfig",
     "LocomotionSkill",
     "evaluate_locomotion",
     "make_locomotion_actor",
+    "check_same_config",
+    "finish_skill_run",
+    "require_positive",
     "train_locomotion",
 ]
 
@@ -105,19 +110,8 @@ class LocomotionConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in (
-            "total_steps",
-            "buffer_size",
-            "num_envs",
-            "frames_per_batch",
-            "batch_size",
-            "hidden",
-            "eval_every",
-            "eval_envs",
-            "eval_steps",
-        ):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        require_positive(self, ("total_steps", "buffer_size", "num_envs", "frames_per_batch", "batch_size", "hidden"))
+        require_positive(self, ("eval_every", "eval_envs", "eval_steps"))
         if self.frames_per_batch % self.num_envs:
             raise ValueError(f"frames_per_batch ({self.frames_per_batch}) must be a multiple of num_envs ({self.num_envs})")
         if not 0 < self.tau <= 1 or not 0 < self.gamma < 1:
@@ -266,15 +260,39 @@ class _Progress:
 
 
 #: Fields a continued run may change: the budget, and when and how much it evaluates and saves.
-_BOOKKEEPING = frozenset({"total_steps", "eval_every", "eval_envs", "eval_steps", "checkpoint_minutes"})
+BOOKKEEPING = frozenset({"total_steps", "eval_every", "eval_envs", "eval_steps", "checkpoint_minutes"})
+
+#: Where a skill run keeps the body of its best evaluation, in its run directory.
+BEST_BODY = "best_body.pt"
 
 
-def _check_same_config(saved: dict[str, Any], config: LocomotionConfig, where: str | Path) -> None:
-    """Refuses to continue a run made with another config (its learning settings, not its bookkeeping)."""
-    defaults = asdict(LocomotionConfig())  # fields added since the run started keep their default
-    changed = sorted(k for k, v in asdict(config).items() if k not in _BOOKKEEPING and saved.get(k, defaults[k]) != v)
+def require_positive(config: Any, names: Iterable[str]) -> None:
+    """Refuses a config whose ``names`` fields are not all >= 1, naming the first that is not."""
+    for name in names:
+        if getattr(config, name) < 1:
+            raise ValueError(f"{name} must be >= 1, got {getattr(config, name)}")
+
+
+def check_same_config(saved: dict[str, Any], config: Any, where: str | Path) -> None:
+    """Refuses to continue a run made with another config (its learning settings, not its
+    :data:`BOOKKEEPING`); ``config`` is a dataclass, and fields added since the run started
+    keep their default."""
+    defaults = asdict(type(config)())
+    changed = sorted(k for k, v in asdict(config).items() if k not in BOOKKEEPING and saved.get(k, defaults[k]) != v)
     if changed:
         raise ValueError(f"{where} was trained with another config (changed: {changed}); use a new --run-dir or the same settings")
+
+
+def finish_skill_run(run_dir: Path, output: str | Path | None, record: dict[str, Any]) -> dict[str, Any]:
+    """Exports the run's best body to ``output`` (unless ``None`` or there is none yet), writes
+    ``record`` (with ``"exported"``) to ``<run_dir>/result.json`` and returns it."""
+    if output is not None and (run_dir / BEST_BODY).exists():
+        output = Path(output)
+        output.parent.mkdir(parents=True, exist_ok=True)
+        atomic_save(torch.load(run_dir / BEST_BODY, weights_only=True), output)
+        record["exported"] = str(output)
+    (run_dir / "result.json").write_text(json.dumps(record, indent=2))
+    return record
 
 
 #: ``train_locomotion``'s default ``output``: the weights the package ships for the skill.
@@ -305,7 +323,7 @@ def train_locomotion(
     run_dir.mkdir(parents=True, exist_ok=True)
     config_path = run_dir / _CONFIG
     if config_path.exists():
-        _check_same_config(json.loads(config_path.read_text()), config, run_dir)
+        check_same_config(json.loads(config_path.read_text()), config, run_dir)
     torch.manual_seed(config.seed)
 
     actor = make_locomotion_actor(skill.network(config.hidden))
@@ -339,10 +357,10 @@ def train_locomotion(
         state = load_checkpoint(Path(resume_from))
         if state.get("skill") != skill.name:
             raise ValueError(f"{resume_from} holds a {state.get('skill')!r} skill, not {skill.name!r}")
-        _check_same_config(state["config"], config, resume_from)
+        check_same_config(state["config"], config, resume_from)
         load_learner(state)
         if "best_body" in state:  # the best policy so far travels with the state
-            atomic_save(state["best_body"], run_dir / "best_body.pt")
+            atomic_save(state["best_body"], run_dir / BEST_BODY)
         print(
             f"[{skill.name}] resumed at {counters['steps']} steps from {resume_from}; the buffer refills "
             f"from the current policy ({config.random_steps} steps)",
@@ -369,7 +387,7 @@ def train_locomotion(
             "counters": dict(counters),
         }
         atomic_save({**learner, "torch_rng": torch.get_rng_state()}, checkpoint)
-        best = run_dir / "best_body.pt"
+        best = run_dir / BEST_BODY
         best_body = {"best_body": torch.load(best, weights_only=True)} if best.exists() else {}
         atomic_save({**learner, **best_body}, run_dir / _RESUME_STATE)
 
@@ -419,7 +437,7 @@ def train_locomotion(
                 metrics.update({f"eval_{name}": value for name, value in result.items()})
                 if result["speed"] > counters["best_speed"]:
                     counters["best_speed"] = result["speed"]
-                    atomic_save(body.state_dict(), run_dir / "best_body.pt")
+                    atomic_save(body.state_dict(), run_dir / BEST_BODY)
                 save()
                 last_save = time.monotonic()
             elif time.monotonic() - last_save > 60 * config.checkpoint_minutes:
@@ -433,13 +451,7 @@ def train_locomotion(
         collector.shutdown()
         save()
     record = {"skill": skill.name, "steps": counters["steps"], "updates": counters["updates"], "best_eval_speed": counters["best_speed"]}
-    if output is not None and (run_dir / "best_body.pt").exists():
-        output = Path(output)
-        output.parent.mkdir(parents=True, exist_ok=True)
-        atomic_save(torch.load(run_dir / "best_body.pt", weights_only=True), output)
-        record["exported"] = str(output)
-    (run_dir / "result.json").write_text(json.dumps(record, indent=2))
-    return record
+    return finish_skill_run(run_dir, output, record)
 
 
 def main(argv: list[str] | None = None) -> None:

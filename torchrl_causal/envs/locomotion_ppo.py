@@ -46,7 +46,15 @@ from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 from torchrl.record.loggers.csv import CSVLogger
 
-from torchrl_causal.envs.locomotion import SKILLS, LocomotionSkill, evaluate_locomotion
+from torchrl_causal.envs.locomotion import (
+    BEST_BODY,
+    SKILLS,
+    LocomotionSkill,
+    check_same_config,
+    evaluate_locomotion,
+    finish_skill_run,
+    require_positive,
+)
 from torchrl_causal.experiment.run_directory import atomic_save, load_checkpoint
 from torchrl_causal.progress import progress
 
@@ -62,7 +70,6 @@ log = logging.getLogger(__name__)
 
 _RESUME_STATE = "resume_state.pt"
 _CONFIG = "ppo_config.json"
-_BEST_BODY = "best_body.pt"
 
 
 @dataclass(frozen=True)
@@ -94,19 +101,8 @@ class PPOLocomotionConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in (
-            "total_steps",
-            "num_envs",
-            "rollout_steps",
-            "epochs",
-            "minibatch_size",
-            "hidden",
-            "eval_every",
-            "eval_envs",
-            "eval_steps",
-        ):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        require_positive(self, ("total_steps", "num_envs", "rollout_steps", "epochs", "minibatch_size", "hidden"))
+        require_positive(self, ("eval_every", "eval_envs", "eval_steps"))
         if self.minibatch_size > self.frames_per_batch:
             raise ValueError(
                 f"minibatch_size ({self.minibatch_size}) exceeds a batch of num_envs x rollout_steps = {self.frames_per_batch}"
@@ -121,10 +117,6 @@ class PPOLocomotionConfig:
     @property
     def frames_per_batch(self) -> int:
         return self.num_envs * self.rollout_steps
-
-
-#: Fields a continued run may change: the budget, and when and how much it evaluates and saves.
-_BOOKKEEPING = frozenset({"total_steps", "eval_every", "eval_envs", "eval_steps", "checkpoint_minutes"})
 
 
 class RunningNormalisation(nn.Module):
@@ -230,13 +222,6 @@ def _make_value(skill: LocomotionSkill, norm: RunningNormalisation, hidden: int)
     return ValueOperator(nn.Sequential(norm, network), in_keys=["observation"])
 
 
-def _check_same_config(saved: dict[str, Any], config: PPOLocomotionConfig, where: str | Path) -> None:
-    defaults = asdict(PPOLocomotionConfig())
-    changed = sorted(k for k, v in asdict(config).items() if k not in _BOOKKEEPING and saved.get(k, defaults[k]) != v)
-    if changed:
-        raise ValueError(f"{where} was trained with another config (changed: {changed}); use a new --run-dir or the same settings")
-
-
 def train_locomotion_ppo(
     run_dir: str | Path,
     config: PPOLocomotionConfig = PPOLocomotionConfig(),
@@ -258,7 +243,7 @@ def train_locomotion_ppo(
     run_dir.mkdir(parents=True, exist_ok=True)
     config_path = run_dir / _CONFIG
     if config_path.exists():
-        _check_same_config(json.loads(config_path.read_text()), config, run_dir)
+        check_same_config(json.loads(config_path.read_text()), config, run_dir)
     torch.manual_seed(config.seed)
 
     norm = RunningNormalisation(skill.observation_dim)
@@ -286,17 +271,17 @@ def train_locomotion_ppo(
         state = load_checkpoint(source)
         if state.get("skill") != skill.name or state.get("algorithm") != "ppo":
             raise ValueError(f"{source} holds a {state.get('algorithm')!r} {state.get('skill')!r} skill, not PPO's {skill.name!r}")
-        _check_same_config(state["config"], config, source)
+        check_same_config(state["config"], config, source)
         loss.load_state_dict(state["loss"])
         optimizer.load_state_dict(state["optimizer"])
         counters.update(state["counters"])
         if "best_body" in state and source != state_path:
-            atomic_save(state["best_body"], run_dir / _BEST_BODY)
+            atomic_save(state["best_body"], run_dir / BEST_BODY)
         log.info("[%s ppo] resumed at %d env steps from %s", skill.name, counters["steps"], source)
     config_path.write_text(json.dumps(asdict(config), indent=2))
 
     def save() -> None:
-        best = run_dir / _BEST_BODY
+        best = run_dir / BEST_BODY
         state = {
             "progress": counters["steps"],
             "algorithm": "ppo",
@@ -315,7 +300,7 @@ def train_locomotion_ppo(
         result = evaluate_locomotion(folded, skill=skill, envs=config.eval_envs, steps=config.eval_steps)
         if result["speed"] > counters["best_speed"]:
             counters["best_speed"] = result["speed"]
-            atomic_save(folded.state_dict(), run_dir / _BEST_BODY)
+            atomic_save(folded.state_dict(), run_dir / BEST_BODY)
         return result
 
     logger = CSVLogger(exp_name="ppo", log_dir=str(run_dir / "logs"))
@@ -362,13 +347,7 @@ def train_locomotion_ppo(
         collector.shutdown()
         save()
     record = {"skill": skill.name, "algorithm": "ppo", "steps": counters["steps"], "best_eval_speed": counters["best_speed"]}
-    if output is not None and (run_dir / _BEST_BODY).exists():
-        output = Path(output)
-        output.parent.mkdir(parents=True, exist_ok=True)
-        atomic_save(torch.load(run_dir / _BEST_BODY, weights_only=True), output)
-        record["exported"] = str(output)
-    (run_dir / "result.json").write_text(json.dumps(record, indent=2))
-    return record
+    return finish_skill_run(run_dir, output, record)
 
 
 def _update(
