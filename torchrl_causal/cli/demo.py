@@ -16,7 +16,7 @@ minutes on 2 CPU cores.
 
 The learners run two at a time (``DEMO_WORKERS``, default: 2 or the machine's cores if
 fewer), one thread each. Budgets are shortened from the CPU scale so that the job fits
-about 11 minutes on 2 cores (:data:`DEMO_SETTINGS`, :data:`DEMO_ALGOS`). Re-running returns
+about 7 minutes on 2 cores (:data:`DEMO_SETTINGS`, :data:`DEMO_ALGOS`). Re-running returns
 finished runs instead of training them again and resumes interrupted ones;
 ``DEMO_RUN_ROOT`` moves the output.
 """
