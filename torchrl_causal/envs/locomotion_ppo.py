@@ -320,16 +320,18 @@ def train_locomotion_ppo(
         bar = progress(config.total_steps, f"{skill.name} ppo", "env steps", enabled=progress_bar, initial=counters["steps"])
         last_save = time.monotonic()
         for batch in collector:
-            metrics = _update(batch, loss, advantage, optimizer, config)
+            metrics = {
+                "train_reward": batch["next", "reward"].mean().item(),
+                "fall_rate_per_step": batch["next", "terminated"].float().mean().item(),
+                "policy_scale": batch["scale"].mean().item(),  # exploration noise (actions span [-1, 1])
+            }
+            metrics.update(_update(batch, loss, advantage, optimizer, config))
             # The statistics move after the update, so each batch is collected and learned with the same ones.
             norm.update(batch["observation"])
             counters["steps"] += batch.numel()
             counters["iterations"] += 1
             collector.update_policy_weights_()
             steps = counters["steps"]
-            metrics["train_reward"] = batch["next", "reward"].mean().item()
-            metrics["fall_rate_per_step"] = batch["next", "terminated"].float().mean().item()
-            metrics["policy_scale"] = batch["scale"].mean().item()  # exploration noise (actions span [-1, 1])
             if steps % config.eval_every < config.frames_per_batch or steps >= config.total_steps:
                 metrics.update({f"eval_{k}": v for k, v in evaluate().items()})
                 save()
@@ -354,7 +356,7 @@ def _update(
     batch: TensorDictBase, loss: ClipPPOLoss, advantage: GAE, optimizer: torch.optim.Optimizer, config: PPOLocomotionConfig
 ) -> dict[str, float]:
     """``epochs`` passes of clipped-PPO minibatch updates over one collected batch."""
-    batch = batch.clone()
+    # The raw rewards are read into the metrics before this: scale them in place, no copy.
     batch.set(("next", "reward"), batch.get(("next", "reward")) * config.reward_scale)
     with torch.no_grad():
         advantage(batch)  # over [num_envs, rollout_steps]: the time axis is the last one
