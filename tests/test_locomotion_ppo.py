@@ -95,8 +95,34 @@ def test_resume_refuses_another_config_or_a_sac_state(tmp_path) -> None:
 
 @pytest.mark.parametrize(
     ("change", "message"),
-    [({"num_envs": 0}, "num_envs must be >= 1"), ({"minibatch_size": 10_000}, "exceeds a batch"), ({"gamma": 1.0}, "0 < gamma < 1")],
+    [
+        ({"num_envs": 0}, "num_envs must be >= 1"),
+        ({"minibatch_size": 10_000}, "exceeds a batch"),
+        ({"gamma": 1.0}, "0 < gamma < 1"),
+        ({"init_scale": 0.0}, "init_scale must be > 0.01"),
+    ],
 )
 def test_bad_configs_are_refused_in_one_line(change, message) -> None:
     with pytest.raises(ValueError, match=message):
         _config(FRAMES, **change)
+
+
+@pytest.mark.parametrize("init_scale", [0.3, 1.0])
+def test_the_exploration_noise_starts_at_init_scale(init_scale: float) -> None:
+    body = SKILLS["humanoid"].network(16)
+    torch.nn.init.zeros_(body[-1].weight)
+    torch.nn.init.zeros_(body[-1].bias)  # the body outputs 0: loc 0, scale exactly the softplus's bias
+    actor = make_ppo_actor(body, RunningNormalisation(SKILLS["humanoid"].observation_dim), init_scale)
+    out = actor(TensorDict(observation=torch.randn(5, SKILLS["humanoid"].observation_dim), batch_size=[5]))
+    torch.testing.assert_close(out["scale"], torch.full_like(out["scale"], init_scale))
+
+
+def test_annealing_decays_the_learning_rate_linearly_to_zero(tmp_path) -> None:
+    # Iteration i (0-based) updates at lr * (1 - i * FRAMES / total): the last of 4 at a quarter.
+    config = _config(4 * FRAMES, anneal_lr=True, lr=1e-3)
+    train_locomotion_ppo(tmp_path / "a", config, progress_bar=False)
+    state = torch.load(tmp_path / "a" / "resume_state.pt", weights_only=True)
+    assert state["optimizer"]["param_groups"][0]["lr"] == pytest.approx(0.25e-3)
+    plain = train_locomotion_ppo(tmp_path / "b", _config(FRAMES), progress_bar=False)
+    assert plain["steps"] == FRAMES
+    assert torch.load(tmp_path / "b" / "resume_state.pt", weights_only=True)["optimizer"]["param_groups"][0]["lr"] == 3e-4

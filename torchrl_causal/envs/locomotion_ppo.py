@@ -77,7 +77,10 @@ class PPOLocomotionConfig:
     """Budget and hyperparameters of a PPO skill run (MuJoCo-PPO defaults: clip 0.2, GAE 0.95).
 
     One iteration collects ``rollout_steps`` steps in each of ``num_envs`` simulations, then
-    makes ``epochs`` passes over them in minibatches of ``minibatch_size``.
+    makes ``epochs`` passes over them in minibatches of ``minibatch_size``. ``init_scale`` is the
+    exploration noise's standard deviation at initialisation (the scale is a biased softplus of
+    the body's second half: 1.0 spans the whole ``[-1, 1]`` torque range, which topples a standing
+    humanoid within ~1 s); ``anneal_lr`` decays the learning rate linearly to 0 over ``total_steps``.
     """
 
     total_steps: int = 30_000_000
@@ -94,6 +97,8 @@ class PPOLocomotionConfig:
     max_grad_norm: float = 0.5
     reward_scale: float = 0.1
     hidden: int = 256
+    init_scale: float = 1.0
+    anneal_lr: bool = False
     eval_every: int = 500_000
     eval_envs: int = 8
     eval_steps: int = 400
@@ -113,6 +118,8 @@ class PPOLocomotionConfig:
             )
         if not (self.lr > 0 and self.max_grad_norm > 0 and self.reward_scale > 0 and self.entropy_coeff >= 0 and self.critic_coeff > 0):
             raise ValueError("lr, max_grad_norm, reward_scale and critic_coeff must be > 0 and entropy_coeff >= 0")
+        if not self.init_scale > 0.01:  # the softplus's floor
+            raise ValueError(f"init_scale must be > 0.01, got {self.init_scale}")
 
     @property
     def frames_per_batch(self) -> int:
@@ -191,11 +198,12 @@ class _TanhMean(nn.Module):
         return torch.tanh(loc)
 
 
-def make_ppo_actor(body: nn.Module, norm: RunningNormalisation) -> ProbabilisticActor:
+def make_ppo_actor(body: nn.Module, norm: RunningNormalisation, init_scale: float = 1.0) -> ProbabilisticActor:
     """The PPO policy: ``Normal(tanh(loc), scale)`` with ``(loc, scale)`` from ``body(norm(obs))``.
 
     Its deterministic action is ``tanh(loc)``; sampled actions are not clipped here (the env
-    clips), so their log-probability is the Gaussian's, as PPO's ratio needs.
+    clips), so their log-probability is the Gaussian's, as PPO's ratio needs. ``scale`` is a
+    softplus biased so that a zero output gives ``init_scale``.
 
     Examples:
         >>> from tensordict import TensorDict
@@ -205,7 +213,8 @@ def make_ppo_actor(body: nn.Module, norm: RunningNormalisation) -> Probabilistic
         >>> out["action"].shape, out["action_log_prob"].shape
         (torch.Size([2, 3]), torch.Size([2]))
     """
-    params = TensorDictModule(nn.Sequential(norm, body, NormalParamExtractor()), in_keys=["observation"], out_keys=["loc", "scale"])
+    extractor = NormalParamExtractor(scale_mapping=f"biased_softplus_{float(init_scale)}")
+    params = TensorDictModule(nn.Sequential(norm, body, extractor), in_keys=["observation"], out_keys=["loc", "scale"])
     mean = TensorDictModule(_TanhMean(), in_keys=["loc"], out_keys=["loc"])
     return ProbabilisticActor(
         TensorDictSequential(params, mean),
@@ -248,7 +257,7 @@ def train_locomotion_ppo(
 
     norm = RunningNormalisation(skill.observation_dim)
     body = skill.network(config.hidden)
-    actor = make_ppo_actor(body, norm)
+    actor = make_ppo_actor(body, norm, config.init_scale)
     value = _make_value(skill, norm, config.hidden)
     loss = ClipPPOLoss(
         actor,
@@ -325,6 +334,9 @@ def train_locomotion_ppo(
                 "fall_rate_per_step": batch["next", "terminated"].float().mean().item(),
                 "policy_scale": batch["scale"].mean().item(),  # exploration noise (actions span [-1, 1])
             }
+            if config.anneal_lr:
+                for group in optimizer.param_groups:
+                    group["lr"] = config.lr * max(0.0, 1.0 - counters["steps"] / config.total_steps)
             metrics.update(_update(batch, loss, advantage, optimizer, config))
             # The statistics move after the update, so each batch is collected and learned with the same ones.
             norm.update(batch["observation"])
@@ -390,6 +402,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--minibatch-size", type=int, default=None, help="default 1024")
     parser.add_argument("--eval-every", type=int, default=None, help="env steps between evaluations (and resume states)")
     parser.add_argument("--seed", type=int, default=None)
+    parser.add_argument("--init-scale", type=float, default=None, help="exploration noise at initialisation (default 1.0)")
+    parser.add_argument("--anneal-lr", action="store_true", help="decay the learning rate linearly to 0 over --steps")
     parser.add_argument(
         "--output", default=None, help="where the best folded policy body is exported (default: the skill's weights in the package)"
     )
@@ -406,6 +420,8 @@ def main(argv: list[str] | None = None) -> None:
         "minibatch_size": args.minibatch_size,
         "eval_every": args.eval_every,
         "seed": args.seed,
+        "init_scale": args.init_scale,
+        "anneal_lr": True if args.anneal_lr else None,
     }
     config = replace(PPOLocomotionConfig(), **{k: v for k, v in overrides.items() if v is not None})
     record = train_locomotion_ppo(
