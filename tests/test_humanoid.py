@@ -162,8 +162,9 @@ def test_skill_observation_is_ogbench_skill_observation():
         torch.testing.assert_close(td["observation"][index, 67:], td["direction"][index])
 
 
-def test_skill_reward_is_stand_times_capped_speed_and_a_low_head_ends_it():
-    env = HumanoidLocomotionEnv(batch_size=1, speed_cap=0.05, gust_process=GustProcess(probability=0.0), seed=1)
+@pytest.mark.parametrize("speed_weight", [1.0, 2.5])
+def test_skill_reward_is_stand_times_capped_speed_and_a_low_head_ends_it(speed_weight):
+    env = HumanoidLocomotionEnv(batch_size=1, speed_cap=0.05, speed_weight=speed_weight, gust_process=GustProcess(probability=0.0), seed=1)
     model = env.simulation.model
     head, torso = model.body("head").id, model.body("torso").id
     generator = torch.Generator().manual_seed(2)
@@ -180,7 +181,7 @@ def test_skill_reward_is_stand_times_capped_speed_and_a_low_head_ends_it():
             data.xmat[torso][8], bounds=(0.9, float("inf")), margin=1.9, sigmoid="linear", value_at_margin=0
         )
         assert td["speed"].item() == pytest.approx(speed, abs=1e-4)
-        assert td["reward"].item() == pytest.approx(stand * (1 + min(speed, 0.05)), abs=1e-4)
+        assert td["reward"].item() == pytest.approx(stand * (1 + speed_weight * min(speed, 0.05)), abs=1e-4)
         capped += speed > 0.05
         assert td["terminated"].item() == (data.xpos[head, 2] < 0.9)
         if td["terminated"].item():

@@ -126,3 +126,29 @@ def test_annealing_decays_the_learning_rate_linearly_to_zero(tmp_path) -> None:
     plain = train_locomotion_ppo(tmp_path / "b", _config(FRAMES), progress_bar=False)
     assert plain["steps"] == FRAMES
     assert torch.load(tmp_path / "b" / "resume_state.pt", weights_only=True)["optimizer"]["param_groups"][0]["lr"] == 3e-4
+
+
+def test_a_run_started_from_another_runs_learner_continues_its_steps_under_its_own_config(tmp_path) -> None:
+    train_locomotion_ppo(tmp_path / "stand", _config(2 * FRAMES), progress_bar=False)
+    parent_file = tmp_path / "stand" / "resume_state.pt"
+    parent = torch.load(parent_file, weights_only=True)
+    child = train_locomotion_ppo(
+        tmp_path / "walk", _config(3 * FRAMES, speed_weight=2.5, lr=1e-4), init_from=parent_file, progress_bar=False
+    )
+    assert child["steps"] == 3 * FRAMES and child["init_steps"] == 2 * FRAMES and child["init_from"] == str(parent_file)
+    state = torch.load(tmp_path / "walk" / "resume_state.pt", weights_only=True)
+    assert state["config"]["speed_weight"] == 2.5 and state["optimizer"]["param_groups"][0]["lr"] == 1e-4
+    assert state["counters"]["iterations"] == 3 and state["counters"]["collect_seed"] == parent["counters"]["collect_seed"] + 1
+    means = [key for key in state["loss"] if key.endswith(".count")]
+    assert all(int(state["loss"][key]) == 3 * FRAMES for key in means)  # the parent's normaliser, one batch more
+    with pytest.raises(ValueError, match="not both"):
+        train_locomotion_ppo(tmp_path / "x", _config(FRAMES), resume_from=parent_file, init_from=parent_file)
+    with pytest.raises(ValueError, match="does not fit this config"):
+        train_locomotion_ppo(tmp_path / "y", _config(3 * FRAMES, hidden=8), init_from=parent_file, progress_bar=False)
+
+
+def test_reward_options_the_skills_env_lacks_are_refused(tmp_path) -> None:
+    with pytest.raises(ValueError, match=r"ant skill's env takes no \['speed_weight'\]"):
+        train_locomotion_ppo(tmp_path, _config(FRAMES, speed_weight=2.0), skill="ant", progress_bar=False)
+    with pytest.raises(ValueError, match="speed_weight must be >= 0"):
+        _config(FRAMES, speed_weight=-1.0)

@@ -181,9 +181,9 @@ class HumanoidLocomotionEnv(DirectionalLocomotionEnv):
     * observation (69): the expert's variables without P (:data:`HUMANOID_SKILL_VARIABLES`:
       hinge angles, head height, extremities, torso vertical, centre-of-mass velocity C, ``qvel``),
       then the command, OGBench's order; never the vibration sensor W;
-    * reward ``stand * (1 + min(speed, speed_cap))``, ``stand`` dm_control's (head at 1.4 m or
-      above, margin 0.35, times torso uprightness) and ``speed`` the torso's ground-plane velocity
-      along the command in m/s (OGBench: ``1 + 2.5 speed``, uncapped);
+    * reward ``stand * (1 + speed_weight * min(speed, speed_cap))``, ``stand`` dm_control's (head at
+      1.4 m or above, margin 0.35, times torso uprightness) and ``speed`` the torso's ground-plane
+      velocity along the command in m/s (OGBench: ``1 + 2.5 speed``, uncapped);
     * start standing (:func:`standing_qpos`, uniform yaw, the maze's noise); terminate when the head
       drops below ``fall_height`` (OGBench starts fallen and never terminates: the standing start
       and the termination are what make the skill affordable here);
@@ -194,6 +194,8 @@ class HumanoidLocomotionEnv(DirectionalLocomotionEnv):
         horizon: steps before truncation.
         direction_period: steps between redraws, or an inclusive ``(low, high)`` range.
         speed_cap: speed (m/s) beyond which walking faster earns nothing.
+        speed_weight: the speed term's weight (1: standing earns half of walking at 1 m/s;
+            OGBench's 2.5 makes walking pay more against standing still).
         fall_height: head height (m) below which the episode terminates.
         gust_process: the tremor (the maze suite's by default).
         seed: seed of the env's generator.
@@ -212,14 +214,15 @@ class HumanoidLocomotionEnv(DirectionalLocomotionEnv):
         horizon: int = 1000,
         direction_period: int | tuple[int, int] = (100, 200),
         speed_cap: float = 1.5,
+        speed_weight: float = 1.0,
         fall_height: float = 0.9,
         gust_process: GustProcess | None = None,
         seed: int | None = None,
     ) -> None:
         count = self.batch_count(batch_size)
-        if not speed_cap > 0 or not fall_height > 0:
-            raise ValueError(f"speed_cap and fall_height must be > 0, got {speed_cap}, {fall_height}")
-        self.speed_cap, self.fall_height = float(speed_cap), float(fall_height)
+        if not speed_cap > 0 or not fall_height > 0 or not speed_weight >= 0:
+            raise ValueError(f"speed_cap and fall_height must be > 0 and speed_weight >= 0, got {speed_cap}, {fall_height}, {speed_weight}")
+        self.speed_cap, self.speed_weight, self.fall_height = float(speed_cap), float(speed_weight), float(fall_height)
         model = mujoco.MjModel.from_xml_path(str(HUMANOID_XML))
         self._readout = HumanoidReadout(model)
         self._variables = np.zeros((count, HUMANOID_STATE_WIDTH))
@@ -259,7 +262,7 @@ class HumanoidLocomotionEnv(DirectionalLocomotionEnv):
         head = self._variables[:, HUMANOID_COLUMNS["H"]]
         upright = self._variables[:, HUMANOID_COLUMNS["V"]][:, 2:]
         stand = torch.from_numpy(stand_reward(head, upright)).float()
-        reward = stand * (1 + speed.clamp(max=self.speed_cap))
+        reward = stand * (1 + self.speed_weight * speed.clamp(max=self.speed_cap))
         return reward, torch.from_numpy(head < self.fall_height)
 
 

@@ -124,18 +124,21 @@ class LocomotionSkill:
 
     Args:
         name: the CLI's ``--skill`` name.
-        make_env: ``(batch_size, seed) -> env`` on open ground.
+        make_env: ``(batch_size, seed, **options) -> env`` on open ground; ``options`` are the
+            env's reward settings a trainer's config may change (the humanoid's ``speed_weight``).
         observation_dim / action_dim: the policy's input and output widths.
         weights: where the package ships the skill's policy body (the default export).
         defaults: the :class:`LocomotionConfig` fields this skill changes.
+        env_options: the names ``make_env`` accepts as ``options``.
     """
 
     name: str
-    make_env: Callable[[int, int], DirectionalLocomotionEnv]
+    make_env: Callable[..., DirectionalLocomotionEnv]
     observation_dim: int
     action_dim: int
     weights: Path
     defaults: dict[str, Any] = field(default_factory=dict)
+    env_options: tuple[str, ...] = ()
 
     def config(self, **overrides: Any) -> LocomotionConfig:
         """The skill's default :class:`LocomotionConfig` with ``overrides`` (``None`` values ignored)."""
@@ -153,7 +156,7 @@ SKILLS: dict[str, LocomotionSkill] = {
     ),
     "humanoid": LocomotionSkill(
         "humanoid",
-        lambda n, seed: HumanoidLocomotionEnv(batch_size=n, seed=seed),
+        lambda n, seed, **options: HumanoidLocomotionEnv(batch_size=n, seed=seed, **options),
         HUMANOID_SKILL_OBSERVATION_DIM,
         21,
         HUMANOID_LOCOMOTION_WEIGHTS,
@@ -165,6 +168,7 @@ SKILLS: dict[str, LocomotionSkill] = {
             "eval_every": 50_000,
             "eval_steps": 400,
         },
+        env_options=("speed_weight",),
     ),
 }
 

@@ -80,7 +80,8 @@ class PPOLocomotionConfig:
     makes ``epochs`` passes over them in minibatches of ``minibatch_size``. ``init_scale`` is the
     exploration noise's standard deviation at initialisation (the scale is a biased softplus of
     the body's second half: 1.0 spans the whole ``[-1, 1]`` torque range, which topples a standing
-    humanoid within ~1 s); ``anneal_lr`` decays the learning rate linearly to 0 over ``total_steps``.
+    humanoid within ~1 s); ``anneal_lr`` decays the learning rate linearly to 0 over ``total_steps``;
+    ``speed_weight`` (``None``: the env's default) weighs the speed term of the skill env's reward.
     """
 
     total_steps: int = 30_000_000
@@ -99,6 +100,7 @@ class PPOLocomotionConfig:
     hidden: int = 256
     init_scale: float = 1.0
     anneal_lr: bool = False
+    speed_weight: float | None = None
     eval_every: int = 500_000
     eval_envs: int = 8
     eval_steps: int = 400
@@ -120,6 +122,13 @@ class PPOLocomotionConfig:
             raise ValueError("lr, max_grad_norm, reward_scale and critic_coeff must be > 0 and entropy_coeff >= 0")
         if not self.init_scale > 0.01:  # the softplus's floor
             raise ValueError(f"init_scale must be > 0.01, got {self.init_scale}")
+        if self.speed_weight is not None and not self.speed_weight >= 0:
+            raise ValueError(f"speed_weight must be >= 0, got {self.speed_weight}")
+
+    @property
+    def env_options(self) -> dict[str, Any]:
+        """The reward settings passed to the skill's env (those left at ``None`` keep the env's default)."""
+        return {} if self.speed_weight is None else {"speed_weight": self.speed_weight}
 
     @property
     def frames_per_batch(self) -> int:
@@ -238,16 +247,25 @@ def train_locomotion_ppo(
     skill: str | LocomotionSkill = "humanoid",
     output: str | Path | None = None,
     resume_from: str | Path | None = None,
+    init_from: str | Path | None = None,
     progress_bar: bool = True,
 ) -> dict[str, Any]:
     """Trains (or resumes) a skill with PPO in ``run_dir``; exports the best folded body to ``output``.
 
     A ``run_dir`` holding a ``resume_state.pt`` continues from it; otherwise ``resume_from`` (a
     ``resume_state.pt`` from another machine) starts it. A run made with another config is
-    refused (the changed fields are named). The best evaluation (speed along the command) keeps
-    its folded body in ``<run_dir>/best_body.pt``. Returns the final record.
+    refused (the changed fields are named). ``init_from`` instead starts a new run, under this
+    config, from another PPO run's learner (weights, normaliser, Adam and its env-step count): a
+    curriculum stage, e.g. a standing policy fine-tuned on a reward that pays walking more. The
+    best evaluation (speed along the command) keeps its folded body in ``<run_dir>/best_body.pt``
+    (a run started ``init_from`` selects among its own evaluations). Returns the final record.
     """
+    if resume_from is not None and init_from is not None:
+        raise ValueError("give resume_from (continue a run) or init_from (start a new run from its learner), not both")
     skill = SKILLS[skill] if isinstance(skill, str) else skill
+    unknown = sorted(set(config.env_options) - set(skill.env_options))
+    if unknown:
+        raise ValueError(f"the {skill.name} skill's env takes no {unknown} (it takes {list(skill.env_options) or 'none'})")
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     config_path = run_dir / _CONFIG
@@ -277,9 +295,7 @@ def train_locomotion_ppo(
     state_path = run_dir / _RESUME_STATE
     source = state_path if state_path.exists() else (Path(resume_from) if resume_from is not None else None)
     if source is not None:
-        state = load_checkpoint(source)
-        if state.get("skill") != skill.name or state.get("algorithm") != "ppo":
-            raise ValueError(f"{source} holds a {state.get('algorithm')!r} {state.get('skill')!r} skill, not PPO's {skill.name!r}")
+        state = _load_ppo_state(source, skill)
         check_same_config(state["config"], config, source)
         loss.load_state_dict(state["loss"])
         optimizer.load_state_dict(state["optimizer"])
@@ -287,6 +303,24 @@ def train_locomotion_ppo(
         if "best_body" in state and source != state_path:
             atomic_save(state["best_body"], run_dir / BEST_BODY)
         log.info("[%s ppo] resumed at %d env steps from %s", skill.name, counters["steps"], source)
+    elif init_from is not None:
+        parent = _load_ppo_state(Path(init_from), skill)
+        try:
+            loss.load_state_dict(parent["loss"])
+            optimizer.load_state_dict(parent["optimizer"])
+        except (RuntimeError, ValueError) as error:
+            raise ValueError(f"{init_from}'s learner does not fit this config (hidden={config.hidden}?): {error}") from error
+        for group in optimizer.param_groups:
+            group["lr"] = config.lr  # this run's learning rate, not the parent's last one
+        inherited = parent["counters"]
+        counters.update(
+            steps=inherited["steps"],
+            iterations=inherited["iterations"],
+            collect_seed=inherited["collect_seed"],
+            init_from=str(init_from),
+            init_steps=inherited["steps"],
+        )
+        log.info("[%s ppo] new run from %s's learner at %d env steps", skill.name, init_from, counters["steps"])
     config_path.write_text(json.dumps(asdict(config), indent=2))
 
     def save() -> None:
@@ -317,7 +351,7 @@ def train_locomotion_ppo(
     if remaining > 0:
         # A resumed run draws fresh episodes from a new seed (the simulations are not saved).
         counters["collect_seed"] += 1
-        env = skill.make_env(config.num_envs, counters["collect_seed"])
+        env = skill.make_env(config.num_envs, counters["collect_seed"], **config.env_options)
         collector = Collector(
             env,
             actor,
@@ -361,7 +395,16 @@ def train_locomotion_ppo(
         collector.shutdown()
         save()
     record = {"skill": skill.name, "algorithm": "ppo", "steps": counters["steps"], "best_eval_speed": counters["best_speed"]}
+    if "init_from" in counters:
+        record.update(init_from=counters["init_from"], init_steps=counters["init_steps"])
     return finish_skill_run(run_dir, output, record)
+
+
+def _load_ppo_state(path: Path, skill: LocomotionSkill) -> dict[str, Any]:
+    state = load_checkpoint(path)
+    if state.get("skill") != skill.name or state.get("algorithm") != "ppo":
+        raise ValueError(f"{path} holds a {state.get('algorithm')!r} {state.get('skill')!r} skill, not PPO's {skill.name!r}")
+    return state
 
 
 def _update(
@@ -404,6 +447,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=None)
     parser.add_argument("--init-scale", type=float, default=None, help="exploration noise at initialisation (default 1.0)")
     parser.add_argument("--anneal-lr", action="store_true", help="decay the learning rate linearly to 0 over --steps")
+    parser.add_argument("--speed-weight", type=float, default=None, help="the reward's speed weight (humanoid; default: the env's, 1.0)")
+    parser.add_argument("--init-from", default=None, help="a PPO resume_state.pt whose learner starts this new run (a curriculum stage)")
     parser.add_argument(
         "--output", default=None, help="where the best folded policy body is exported (default: the skill's weights in the package)"
     )
@@ -422,10 +467,16 @@ def main(argv: list[str] | None = None) -> None:
         "seed": args.seed,
         "init_scale": args.init_scale,
         "anneal_lr": True if args.anneal_lr else None,
+        "speed_weight": args.speed_weight,
     }
     config = replace(PPOLocomotionConfig(), **{k: v for k, v in overrides.items() if v is not None})
     record = train_locomotion_ppo(
-        args.run_dir or f"runs/{skill.name}_ppo", config, skill=skill, output=args.output or skill.weights, resume_from=args.resume_from
+        args.run_dir or f"runs/{skill.name}_ppo",
+        config,
+        skill=skill,
+        output=args.output or skill.weights,
+        resume_from=args.resume_from,
+        init_from=args.init_from,
     )
     print(json.dumps(record))
 
