@@ -152,3 +152,12 @@ def test_reward_options_the_skills_env_lacks_are_refused(tmp_path) -> None:
         train_locomotion_ppo(tmp_path, _config(FRAMES, speed_weight=2.0), skill="ant", progress_bar=False)
     with pytest.raises(ValueError, match="speed_weight must be >= 0"):
         _config(FRAMES, speed_weight=-1.0)
+
+
+def test_the_best_evaluation_is_the_fastest_upright_one_not_the_fastest(tmp_path, monkeypatch) -> None:
+    import torchrl_causal.envs.locomotion_ppo as ppo
+
+    evaluations = iter([{"speed": 0.5, "fall_rate": 1.0, "steps_to_fall": 30.0}, {"speed": 0.1, "fall_rate": 0.0, "steps_to_fall": 10.0}])
+    monkeypatch.setattr(ppo, "evaluate_locomotion", lambda *args, **kwargs: next(evaluations))
+    record = train_locomotion_ppo(tmp_path, _config(4 * FRAMES), progress_bar=False)  # evaluates at 2 and 4 batches
+    assert record["best_eval_score"] == pytest.approx(0.1)  # a lunge that falls scores 0, whatever its speed

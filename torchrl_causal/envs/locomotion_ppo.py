@@ -54,6 +54,7 @@ from torchrl_causal.envs.locomotion import (
     evaluate_locomotion,
     finish_skill_run,
     require_positive,
+    upright_speed,
 )
 from torchrl_causal.experiment.run_directory import atomic_save, load_checkpoint
 from torchrl_causal.progress import progress
@@ -257,7 +258,7 @@ def train_locomotion_ppo(
     refused (the changed fields are named). ``init_from`` instead starts a new run, under this
     config, from another PPO run's learner (weights, normaliser, Adam and its env-step count): a
     curriculum stage, e.g. a standing policy fine-tuned on a reward that pays walking more. The
-    best evaluation (speed along the command) keeps its folded body in ``<run_dir>/best_body.pt``
+    best evaluation (:func:`~torchrl_causal.envs.locomotion.upright_speed`) keeps its folded body in ``<run_dir>/best_body.pt``
     (a run started ``init_from`` selects among its own evaluations). Returns the final record.
     """
     if resume_from is not None and init_from is not None:
@@ -290,7 +291,7 @@ def train_locomotion_ppo(
     loss.set_keys(sample_log_prob="action_log_prob")
     advantage = GAE(gamma=config.gamma, lmbda=config.lmbda, value_network=value, average_gae=False)
     optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
-    counters: dict[str, Any] = {"steps": 0, "iterations": 0, "best_speed": -math.inf, "collect_seed": config.seed}
+    counters: dict[str, Any] = {"steps": 0, "iterations": 0, "best_score": -math.inf, "collect_seed": config.seed}
 
     state_path = run_dir / _RESUME_STATE
     source = state_path if state_path.exists() else (Path(resume_from) if resume_from is not None else None)
@@ -341,8 +342,8 @@ def train_locomotion_ppo(
     def evaluate() -> dict[str, float]:
         folded = fold_observation_normalisation(norm, body)
         result = evaluate_locomotion(folded, skill=skill, envs=config.eval_envs, steps=config.eval_steps)
-        if result["speed"] > counters["best_speed"]:
-            counters["best_speed"] = result["speed"]
+        if upright_speed(result) > counters["best_score"]:
+            counters["best_score"] = upright_speed(result)
             atomic_save(folded.state_dict(), run_dir / BEST_BODY)
         return result
 
@@ -394,7 +395,7 @@ def train_locomotion_ppo(
         bar.close()
         collector.shutdown()
         save()
-    record = {"skill": skill.name, "algorithm": "ppo", "steps": counters["steps"], "best_eval_speed": counters["best_speed"]}
+    record = {"skill": skill.name, "algorithm": "ppo", "steps": counters["steps"], "best_eval_score": counters["best_score"]}
     if "init_from" in counters:
         record.update(init_from=counters["init_from"], init_steps=counters["init_steps"])
     return finish_skill_run(run_dir, output, record)
