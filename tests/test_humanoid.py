@@ -200,6 +200,39 @@ def test_skill_commands_are_redrawn_within_the_period_range():
     assert gaps.min() >= 3 and gaps.max() <= 5 and len(gaps.unique()) > 1
 
 
+@pytest.mark.parametrize("spread", [0.0, 0.5])
+def test_commands_lie_within_the_spread_of_the_torso_heading_at_each_draw(spread):
+    env = HumanoidLocomotionEnv(
+        batch_size=3, direction_period=(3, 5), command_spread=spread, gust_process=GustProcess(probability=0.0), seed=4
+    )
+    model = env.simulation.model
+    torso = model.body("torso").id
+
+    def headings() -> np.ndarray:  # from the torso's rotation matrix, not from the quaternion the env reads
+        out = []
+        for data in env.simulation.datas:
+            mujoco.mj_kinematics(model, data)
+            out.append(np.arctan2(data.xmat[torso][3], data.xmat[torso][0]))
+        return np.array(out)
+
+    td = env.reset()
+    draws = [(td["direction"].numpy(), headings(), np.ones(3, dtype=bool))]
+    for _ in range(25):  # zero torques: ~35 steps before a fall, so only redraws change the command
+        before = td["direction"].clone()
+        td = env.step(td.set("action", torch.zeros(3, 21)))["next"]
+        draws.append((td["direction"].numpy(), headings(), (td["direction"] != before).any(-1).numpy()))
+    offsets = np.concatenate([np.angle(np.exp(1j * (np.arctan2(d[:, 1], d[:, 0]) - h)))[new] for d, h, new in draws])
+    assert len(offsets) > 3 * 5  # the first draws and several redraws
+    assert np.abs(offsets).max() <= spread + 1e-5
+    if spread > 0:
+        assert np.abs(offsets).max() > spread / 2  # drawn within the spread, not pinned to the heading
+
+
+def test_a_command_spread_outside_zero_to_pi_is_refused():
+    with pytest.raises(ValueError, match=r"command_spread must lie in \[0, pi\]"):
+        HumanoidLocomotionEnv(batch_size=1, command_spread=4.0)
+
+
 # -- the maze expert's wiring (no trained skill ships yet) -------------------------------------
 
 

@@ -100,6 +100,7 @@ def test_resume_refuses_another_config_or_a_sac_state(tmp_path) -> None:
         ({"minibatch_size": 10_000}, "exceeds a batch"),
         ({"gamma": 1.0}, "0 < gamma < 1"),
         ({"init_scale": 0.0}, "init_scale must be > 0.01"),
+        ({"command_spread": -0.1}, r"command_spread must lie in \[0, pi\]"),
     ],
 )
 def test_bad_configs_are_refused_in_one_line(change, message) -> None:

@@ -16,6 +16,7 @@ open-ground task.
 from __future__ import annotations
 
 import importlib.util
+import math
 import pathlib
 
 from collections.abc import Sequence
@@ -196,6 +197,8 @@ class HumanoidLocomotionEnv(DirectionalLocomotionEnv):
         speed_cap: speed (m/s) beyond which walking faster earns nothing.
         speed_weight: the speed term's weight (1: standing earns half of walking at 1 m/s;
             OGBench's 2.5 makes walking pay more against standing still).
+        command_spread: the largest angle between a new command and the torso's heading
+            (:class:`~torchrl_causal.envs.open_ground.DirectionalLocomotionEnv`; ``pi``: uniform).
         fall_height: head height (m) below which the episode terminates.
         gust_process: the tremor (the maze suite's by default).
         seed: seed of the env's generator.
@@ -215,6 +218,7 @@ class HumanoidLocomotionEnv(DirectionalLocomotionEnv):
         direction_period: int | tuple[int, int] = (100, 200),
         speed_cap: float = 1.5,
         speed_weight: float = 1.0,
+        command_spread: float = math.pi,
         fall_height: float = 0.9,
         gust_process: GustProcess | None = None,
         seed: int | None = None,
@@ -234,6 +238,7 @@ class HumanoidLocomotionEnv(DirectionalLocomotionEnv):
             direction_period=direction_period,
             gust_process=gust_process,
             seed=seed,
+            command_spread=command_spread,
         )
 
     def _start_state(self, count: int) -> tuple[np.ndarray, np.ndarray]:

@@ -169,7 +169,7 @@ SKILLS: dict[str, LocomotionSkill] = {
             "eval_every": 50_000,
             "eval_steps": 400,
         },
-        env_options=("speed_weight",),
+        env_options=("speed_weight", "command_spread"),
     ),
 }
 

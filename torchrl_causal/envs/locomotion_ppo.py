@@ -82,7 +82,8 @@ class PPOLocomotionConfig:
     exploration noise's standard deviation at initialisation (the scale is a biased softplus of
     the body's second half: 1.0 spans the whole ``[-1, 1]`` torque range, which topples a standing
     humanoid within ~1 s); ``anneal_lr`` decays the learning rate linearly to 0 over ``total_steps``;
-    ``speed_weight`` (``None``: the env's default) weighs the speed term of the skill env's reward.
+    ``speed_weight`` (``None``: the env's default) weighs the speed term of the skill env's reward;
+    ``command_spread`` (``None``: uniform commands) bounds the angle between a command and the heading.
     """
 
     total_steps: int = 30_000_000
@@ -102,6 +103,7 @@ class PPOLocomotionConfig:
     init_scale: float = 1.0
     anneal_lr: bool = False
     speed_weight: float | None = None
+    command_spread: float | None = None
     eval_every: int = 500_000
     eval_envs: int = 8
     eval_steps: int = 400
@@ -125,11 +127,14 @@ class PPOLocomotionConfig:
             raise ValueError(f"init_scale must be > 0.01, got {self.init_scale}")
         if self.speed_weight is not None and not self.speed_weight >= 0:
             raise ValueError(f"speed_weight must be >= 0, got {self.speed_weight}")
+        if self.command_spread is not None and not 0 <= self.command_spread <= math.pi:
+            raise ValueError(f"command_spread must lie in [0, pi], got {self.command_spread}")
 
     @property
     def env_options(self) -> dict[str, Any]:
         """The reward settings passed to the skill's env (those left at ``None`` keep the env's default)."""
-        return {} if self.speed_weight is None else {"speed_weight": self.speed_weight}
+        options = {"speed_weight": self.speed_weight, "command_spread": self.command_spread}
+        return {name: value for name, value in options.items() if value is not None}
 
     @property
     def frames_per_batch(self) -> int:
@@ -449,6 +454,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--init-scale", type=float, default=None, help="exploration noise at initialisation (default 1.0)")
     parser.add_argument("--anneal-lr", action="store_true", help="decay the learning rate linearly to 0 over --steps")
     parser.add_argument("--speed-weight", type=float, default=None, help="the reward's speed weight (humanoid; default: the env's, 1.0)")
+    parser.add_argument(
+        "--command-spread", type=float, default=None, help="max angle (rad) between a command and the heading (humanoid; default pi)"
+    )
     parser.add_argument("--init-from", default=None, help="a PPO resume_state.pt whose learner starts this new run (a curriculum stage)")
     parser.add_argument(
         "--output", default=None, help="where the best folded policy body is exported (default: the skill's weights in the package)"
@@ -469,6 +477,7 @@ def main(argv: list[str] | None = None) -> None:
         "init_scale": args.init_scale,
         "anneal_lr": True if args.anneal_lr else None,
         "speed_weight": args.speed_weight,
+        "command_spread": args.command_spread,
     }
     config = replace(PPOLocomotionConfig(), **{k: v for k, v in overrides.items() if v is not None})
     record = train_locomotion_ppo(

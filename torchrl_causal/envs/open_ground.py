@@ -28,7 +28,7 @@ from torchrl.envs import EnvBase
 from torchrl_causal.envs.base import GustProcess
 from torchrl_causal.envs.mujoco_maze import BatchedSimulation
 
-__all__ = ["DirectionalLocomotionEnv", "load_skill_network", "make_skill_network"]
+__all__ = ["DirectionalLocomotionEnv", "load_skill_network", "make_skill_network", "root_heading"]
 
 
 def make_skill_network(observation_dim: int, action_dim: int, hidden: int = 256) -> nn.Module:
@@ -66,6 +66,21 @@ def load_skill_network(path: str | pathlib.Path, network: nn.Module, *, regenera
     return network.eval()
 
 
+def root_heading(qpos: np.ndarray) -> np.ndarray:
+    """The yaw (radians) of each root body's x-axis on the ground, from a free joint's ``qpos[:, 3:7]`` (w, x, y, z, any norm).
+
+    Examples:
+        >>> qpos = np.zeros((2, 7))
+        >>> qpos[:, 3:7] = [[1, 0, 0, 0], [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)]]  # facing +x, then turned 90 deg
+        >>> root_heading(qpos).round(6).tolist()
+        [0.0, 1.570796]
+    """
+    w, x, y, z = qpos[:, 3], qpos[:, 4], qpos[:, 5], qpos[:, 6]
+    # w^2 + x^2 - y^2 - z^2 rather than 1 - 2 (y^2 + z^2): exact for a quaternion MuJoCo has not
+    # normalised yet (a reset's noise leaves it off unit length).
+    return np.arctan2(2 * (w * z + x * y), w * w + x * x - y * y - z * z)
+
+
 class DirectionalLocomotionEnv(EnvBase):
     """Base of the skill envs: walk along a commanded direction in open ground, in the gusts.
 
@@ -80,6 +95,12 @@ class DirectionalLocomotionEnv(EnvBase):
             period uniformly from ``low..high`` (inclusive).
         gust_process: the pushes (the maze suite's by default; ``GustProcess(probability=0)`` for calm).
         seed: seed of the env's generator.
+        command_spread: each command is drawn uniformly within this angle (radians) of the root
+            body's heading (its x-axis on the ground) at the draw; ``pi`` (the default) is uniform
+            over the circle, whatever the heading. A skill that cannot see its heading (OGBench's
+            humanoid observation has no yaw) earns nothing on average by walking straight under
+            uniform commands, only by walking and steering; ``0`` (always straight ahead) teaches
+            the walk first, a curriculum's first stage.
     """
 
     def __init__(
@@ -91,8 +112,12 @@ class DirectionalLocomotionEnv(EnvBase):
         direction_period: int | tuple[int, int],
         gust_process: GustProcess | None,
         seed: int | None,
+        command_spread: float = math.pi,
     ) -> None:
         n = simulation.num_envs
+        if not 0 <= command_spread <= math.pi:
+            raise ValueError(f"command_spread must lie in [0, pi], got {command_spread}")
+        self.command_spread = float(command_spread)
         low, high = (direction_period, direction_period) if isinstance(direction_period, int) else direction_period
         if horizon < 1 or not 1 <= low <= high:
             raise ValueError(f"need horizon >= 1 and 1 <= direction_period, got {horizon}, {direction_period!r}")
@@ -147,8 +172,13 @@ class DirectionalLocomotionEnv(EnvBase):
     def _set_seed(self, seed: int | None) -> None:
         self.rng.manual_seed(int(torch.randint(0, 2**62, ()).item()) if seed is None else seed)
 
-    def _draw_directions(self, count: int) -> torch.Tensor:
-        angle = 2 * math.pi * torch.rand(count, generator=self.rng)
+    def _draw_directions(self, count: int, qpos: np.ndarray) -> torch.Tensor:
+        """``count`` unit commands for the simulations whose positions are ``qpos`` (``(count, nq)``)."""
+        if self.command_spread >= math.pi:  # uniform: the heading is irrelevant (and the random stream as before)
+            angle = 2 * math.pi * torch.rand(count, generator=self.rng)
+        else:
+            offset = self.command_spread * (2 * torch.rand(count, generator=self.rng) - 1)
+            angle = torch.from_numpy(root_heading(qpos)).float() + offset
         return torch.stack((angle.cos(), angle.sin()), dim=-1)
 
     def _draw_periods(self, count: int) -> torch.Tensor:
@@ -176,7 +206,10 @@ class DirectionalLocomotionEnv(EnvBase):
             count = len(indices)
             self.simulation.reset(indices.numpy(), *self._start_state(count))
             given = None if tensordict is None else tensordict.get("direction", None)
-            self._direction[indices] = self._draw_directions(count) if given is None else given[indices].float()
+            if given is None:
+                self._direction[indices] = self._draw_directions(count, self.simulation.qpos()[indices.numpy()])
+            else:
+                self._direction[indices] = given[indices].float()
             self._gust[indices] = self.gust_process.draw((count,), generator=self.rng)
             self._steps[indices] = 0
             self._next_redraw[indices] = self._draw_periods(count)
@@ -195,7 +228,7 @@ class DirectionalLocomotionEnv(EnvBase):
         redraw = (self._steps >= self._next_redraw).flatten()
         if redraw.any():
             count = int(redraw.sum())
-            self._direction[redraw] = self._draw_directions(count)
+            self._direction[redraw] = self._draw_directions(count, qpos[redraw.numpy()])
             self._next_redraw[redraw] = self._steps[redraw] + self._draw_periods(count)
         self._gust = self.gust_process.advance(self._gust, self._steps, generator=self.rng)
         out = self._observe(qpos, speed)
