@@ -208,9 +208,16 @@ def _make_critic(skill: LocomotionSkill, hidden: int) -> ValueOperator:
 
 @torch.no_grad()
 def evaluate_locomotion(
-    body: nn.Module, *, skill: str | LocomotionSkill = "ant", envs: int = 8, steps: int = 300, seed: int = 12345
+    body: nn.Module,
+    *,
+    skill: str | LocomotionSkill = "ant",
+    envs: int = 8,
+    steps: int = 300,
+    seed: int = 12345,
+    env_options: Mapping[str, Any] | None = None,
 ) -> dict[str, float]:
-    """Deterministic rollouts of ``body`` on open ground, in the gusts.
+    """Deterministic rollouts of ``body`` on open ground, in the gusts (the skill env's
+    ``env_options``, e.g. a curriculum stage's ``command_spread``; its defaults otherwise).
 
     Returns ``speed``, the mean ground-plane speed (m/s) along the command over every step;
     ``fall_rate``, the fraction of envs that fell at least once (a fallen env restarts);
@@ -218,7 +225,7 @@ def evaluate_locomotion(
     ant's command changes every 100 steps, the humanoid's every 100-200.
     """
     skill = SKILLS[skill] if isinstance(skill, str) else skill
-    env = skill.make_env(envs, seed)
+    env = skill.make_env(envs, seed, **(env_options or {}))
     env.horizon = steps
     actor = make_locomotion_actor(body)
     with set_exploration_type(ExplorationType.DETERMINISTIC):
