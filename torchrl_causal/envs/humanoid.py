@@ -165,8 +165,8 @@ def load_humanoid_locomotion_network(path: str | pathlib.Path = HUMANOID_LOCOMOT
         path,
         make_skill_network(HUMANOID_SKILL_OBSERVATION_DIM, 21),
         regenerate=(
-            "python -m torchrl_causal.envs.locomotion --skill humanoid (~7-10 CPU-hours over several sittings; "
-            "results/humanoid_locomotion/README.md)"
+            "python -m torchrl_causal.envs.locomotion_ppo --skill humanoid, in curriculum stages (standing, walking "
+            "straight, steering; tens of millions of env steps over several sittings): results/humanoid_locomotion/README.md"
         ),
     )
 
