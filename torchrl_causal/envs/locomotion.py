@@ -64,7 +64,6 @@ __all__ = [
     "BEST_BODY",
     "BOOKKEEPING",
     "SKILLS",
-    "upright_speed",
     "SKILL_WEIGHTS",
     "LocomotionConfig",
     "LocomotionSkill",
@@ -74,6 +73,7 @@ __all__ = [
     "finish_skill_run",
     "require_positive",
     "train_locomotion",
+    "upright_speed",
 ]
 
 _CHECKPOINT = "checkpoint.pt"
@@ -461,8 +461,9 @@ def train_locomotion(
                 body = actor.module[0].module[0]
                 result = evaluate_locomotion(body, skill=skill, envs=config.eval_envs, steps=config.eval_steps)
                 metrics.update({f"eval_{name}": value for name, value in result.items()})
-                if upright_speed(result) > counters["best_score"]:
-                    counters["best_score"] = upright_speed(result)
+                score = upright_speed(result)
+                if score > counters["best_score"]:
+                    counters["best_score"] = score
                     atomic_save(body.state_dict(), run_dir / BEST_BODY)
                 save()
                 last_save = time.monotonic()

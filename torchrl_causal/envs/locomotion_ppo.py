@@ -348,8 +348,9 @@ def train_locomotion_ppo(
         folded = fold_observation_normalisation(norm, body)
         # On the run's own task (a curriculum stage's commands); the final stage's is the skill's.
         result = evaluate_locomotion(folded, skill=skill, envs=config.eval_envs, steps=config.eval_steps, env_options=config.env_options)
-        if upright_speed(result) > counters["best_score"]:
-            counters["best_score"] = upright_speed(result)
+        score = upright_speed(result)
+        if score > counters["best_score"]:
+            counters["best_score"] = score
             atomic_save(folded.state_dict(), run_dir / BEST_BODY)
         return result
 

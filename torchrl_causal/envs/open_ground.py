@@ -202,18 +202,20 @@ class DirectionalLocomotionEnv(EnvBase):
         if tensordict is not None and "_reset" in tensordict.keys():
             mask = tensordict.get("_reset").reshape(n)
         indices = mask.nonzero().flatten()
+        qpos = None
         if len(indices):
             count = len(indices)
             self.simulation.reset(indices.numpy(), *self._start_state(count))
+            qpos = self.simulation.qpos()  # the fresh starts' positions: the commands and the observation read them
             given = None if tensordict is None else tensordict.get("direction", None)
             if given is None:
-                self._direction[indices] = self._draw_directions(count, self.simulation.qpos()[indices.numpy()])
+                self._direction[indices] = self._draw_directions(count, qpos[indices.numpy()])
             else:
                 self._direction[indices] = given[indices].float()
             self._gust[indices] = self.gust_process.draw((count,), generator=self.rng)
             self._steps[indices] = 0
             self._next_redraw[indices] = self._draw_periods(count)
-        return self._observe(self.simulation.qpos())
+        return self._observe(self.simulation.qpos() if qpos is None else qpos)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         before = tensordict.get("xy")
