@@ -143,7 +143,7 @@ def test_a_run_started_from_another_runs_learner_continues_its_steps_under_its_o
     means = [key for key in state["loss"] if key.endswith(".count")]
     assert all(int(state["loss"][key]) == 3 * FRAMES for key in means)  # the parent's normaliser, one batch more
     for missing in ({"init_from": tmp_path / "none.pt"}, {"resume_from": tmp_path / "none.pt"}):
-        with pytest.raises(FileNotFoundError, match="no PPO resume state at"):
+        with pytest.raises(FileNotFoundError, match="no checkpoint at"):
             train_locomotion_ppo(tmp_path / "z", _config(FRAMES), progress_bar=False, **missing)
     with pytest.raises(ValueError, match="not both"):
         train_locomotion_ppo(tmp_path / "x", _config(FRAMES), resume_from=parent_file, init_from=parent_file)

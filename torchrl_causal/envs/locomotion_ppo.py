@@ -409,8 +409,6 @@ def train_locomotion_ppo(
 
 
 def _load_ppo_state(path: Path, skill: LocomotionSkill) -> dict[str, Any]:
-    if not path.is_file():  # load_checkpoint would call a missing file corrupted
-        raise FileNotFoundError(f"no PPO resume state at {path}")
     state = load_checkpoint(path)
     if state.get("skill") != skill.name or state.get("algorithm") != "ppo":
         raise ValueError(f"{path} holds a {state.get('algorithm')!r} {state.get('skill')!r} skill, not PPO's {skill.name!r}")

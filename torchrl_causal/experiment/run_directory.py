@@ -207,7 +207,10 @@ def _checkpoint_remedy(path: Path) -> str:
 
 def load_checkpoint(path: Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
     """``torch.load(..., weights_only=True)`` onto ``map_location``, with an error that
-    names the file. A checkpoint written on a GPU loads on a machine without one."""
+    names the file. A checkpoint written on a GPU loads on a machine without one; a missing file
+    is refused as missing (``FileNotFoundError``), not as corrupted."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"no checkpoint at {path}")
     try:
         state = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as err:  # pickle, zip and unpickler errors all mean the same here
