@@ -1,12 +1,16 @@
-"""The Confounded AntMaze expert beside the paper's (Table 1 / Appendix F), in both regimes.
+"""The Confounded AntMaze / HumanoidMaze experts beside the paper's (Table 1 / Appendix F), in both regimes.
 
-Runs :class:`~torchrl_causal.envs.AntMazeExpert` (planner + shipped locomotion weights) for
-``--episodes`` episodes per maze, regime and success radius, and prints the success rate,
-the mean successful episode length and the raw E[Y] next to the paper's experts
-(Medium: 87.6% / 301 ± 57 steps / -104.0; Large: 55.9% / 648 ± 99 / -255.2)::
+Runs :class:`~torchrl_causal.envs.AntMazeExpert` or :class:`~torchrl_causal.envs.HumanoidMazeExpert`
+(planner + a locomotion skill's weights, by default the shipped ones) for ``--episodes``
+episodes per maze, regime and success radius, and prints the success rate, the mean successful
+episode length and the raw E[Y] next to the paper's experts (AntMaze Medium: 87.6% / 301 ± 57
+steps / -104.0, Large: 55.9% / 648 ± 99 / -255.2; HumanoidMaze Medium: 33.8% / 976 ± 410 /
+-522.9, Large: 7.0% / 1463 ± 366 / -840.6)::
 
-    OMP_NUM_THREADS=1 python benchmarks/antmaze_expert.py --episodes 500 --radius 0.5 5.0 \
+    OMP_NUM_THREADS=1 python benchmarks/maze_expert.py --robot ant --episodes 500 --radius 0.5 5.0 \
         --output results/antmaze_expert.md
+    OMP_NUM_THREADS=1 python benchmarks/maze_expert.py --robot humanoid --episodes 500 --radius 0.45 \
+        --output results/humanoidmaze_expert.md
 """
 
 from __future__ import annotations
@@ -18,16 +22,21 @@ from pathlib import Path
 
 import torch
 
-from torchrl_causal.envs import AntMazeEnv, AntMazeExpert
+from torchrl_causal.envs import AntMazeEnv, AntMazeExpert, HumanoidMazeEnv, HumanoidMazeExpert
 from torchrl_causal.evaluation import evaluate_policy
 
-#: the paper's expert rows: success %, mean successful length, its std, raw E[Y], its std.
-PAPER = {"medium": (87.6, 301, 57, -104.0, 87.5), "large": (55.9, 648, 99, -255.2, None)}
+#: per robot: its env, its expert, and the paper's expert rows (success %, mean successful
+#: length, its std, raw E[Y]).
+ROBOTS = {
+    "ant": (AntMazeEnv, AntMazeExpert, {"medium": (87.6, 301, 57, -104.0), "large": (55.9, 648, 99, -255.2)}),
+    "humanoid": (HumanoidMazeEnv, HumanoidMazeExpert, {"medium": (33.8, 976, 410, -522.9), "large": (7.0, 1463, 366, -840.6)}),
+}
 
 
-def evaluate(maze: str, regime: str, radius: float, episodes: int, batch: int, seed: int, weights: str | None):
-    env = AntMazeEnv(maze, batch_size=batch, regime=regime, seed=seed, success_radius=radius)
-    expert = AntMazeExpert(env, **({} if weights is None else {"weights": weights}))
+def evaluate(robot: str, maze: str, regime: str, radius: float, episodes: int, batch: int, seed: int, weights: str | None):
+    env_class, expert_class, _ = ROBOTS[robot]
+    env = env_class(maze, batch_size=batch, regime=regime, seed=seed, success_radius=radius)
+    expert = expert_class(env, **({} if weights is None else {"weights": weights}))
     result = evaluate_policy(env, expert, episodes=episodes, max_steps=env.horizon, regime=regime, seeds=(seed,))
     env.close()
     return result
@@ -35,6 +44,7 @@ def evaluate(maze: str, regime: str, radius: float, episodes: int, batch: int, s
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--robot", choices=sorted(ROBOTS), default="ant")
     parser.add_argument("--mazes", nargs="+", default=["medium", "large"])
     parser.add_argument("--regimes", nargs="+", default=["train", "deploy"])
     parser.add_argument("--radius", nargs="+", type=float, default=[0.5, 5.0], help="success radii (m)")
@@ -55,8 +65,8 @@ def main() -> None:
     for maze in args.mazes:
         for radius in args.radius:
             for regime in args.regimes:
-                r = evaluate(maze, regime, radius, args.episodes, args.batch, args.seed, args.weights)
-                p = PAPER[maze]
+                r = evaluate(args.robot, maze, regime, radius, args.episodes, args.batch, args.seed, args.weights)
+                p = ROBOTS[args.robot][2][maze]
                 paper = f"{p[0]}% / {p[1]} ± {p[2]} / {p[3]}" if regime == "train" else "—"
                 lines.append(
                     f"| {maze} | {radius:g} | {regime} | {r.n_episodes} | {100 * r.success_rate:.1f} ± "
@@ -69,10 +79,10 @@ def main() -> None:
     print(f"\n{table}\n\n{time.time() - start:.0f} s")
     if args.output:
         Path(args.output).write_text(
-            "# Confounded AntMaze expert (planner + trained locomotion skill)\n\n"
+            f"# Confounded {'AntMaze' if args.robot == 'ant' else 'HumanoidMaze'} expert (planner + trained locomotion skill)\n\n"
             f"Command ({time.time() - start:.0f} s on one core of a 2-core CPU machine):\n\n```\n{command}\n```\n\n"
             f"Seed {args.seed}; {args.episodes} episodes per row (the first episode of each of {args.batch} "
-            "parallel envs per round), horizon 1000, deterministic expert.\n\n" + table + "\n"
+            f"parallel envs per round), horizon {ROBOTS[args.robot][0].default_horizon}, deterministic expert.\n\n" + table + "\n"
         )
 
 
