@@ -165,3 +165,17 @@ def test_the_best_evaluation_is_the_fastest_upright_one_not_the_fastest(tmp_path
     monkeypatch.setattr(ppo, "evaluate_locomotion", lambda *args, **kwargs: next(evaluations))
     record = train_locomotion_ppo(tmp_path, _config(4 * FRAMES), progress_bar=False)  # evaluates at 2 and 4 batches
     assert record["best_eval_score"] == pytest.approx(0.1)  # a lunge that falls scores 0, whatever its speed
+
+
+def test_the_command_line_sets_the_config_it_names(tmp_path, monkeypatch) -> None:
+    from torchrl_causal.envs import locomotion_ppo
+
+    seen = {}
+    monkeypatch.setattr(locomotion_ppo, "train_locomotion_ppo", lambda run_dir, config, **kw: seen.update(config=config, **kw) or {})
+    argv = ["--run-dir", str(tmp_path), "--gamma", "0.995", "--speed-weight", "2.5", "--command-spread", "0.5", "--steps", "640"]
+    locomotion_ppo.main([*argv, "--init-from", "parent.pt", "--output", "x.pt"])
+    config = seen["config"]
+    assert (config.gamma, config.speed_weight, config.command_spread, config.total_steps) == (0.995, 2.5, 0.5, 640)
+    assert config.lmbda == PPOLocomotionConfig().lmbda and seen["init_from"] == "parent.pt"
+    with pytest.raises(ValueError, match="need 0 < gamma < 1"):
+        locomotion_ppo.main(["--run-dir", str(tmp_path), "--gamma", "1.0"])

@@ -453,6 +453,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--minibatch-size", type=int, default=None, help="default 1024")
     parser.add_argument("--eval-every", type=int, default=None, help="env steps between evaluations (and resume states)")
     parser.add_argument("--seed", type=int, default=None)
+    parser.add_argument("--gamma", type=float, default=None, help="discount (default 0.99; higher makes a fall cost more)")
     parser.add_argument("--entropy-coeff", type=float, default=None, help="PPO's entropy bonus (default 1e-3)")
     parser.add_argument("--init-scale", type=float, default=None, help="exploration noise at initialisation (default 1.0)")
     parser.add_argument("--anneal-lr", action="store_true", help="decay the learning rate linearly to 0 over --steps")
@@ -477,6 +478,7 @@ def main(argv: list[str] | None = None) -> None:
         "minibatch_size": args.minibatch_size,
         "eval_every": args.eval_every,
         "seed": args.seed,
+        "gamma": args.gamma,
         "entropy_coeff": args.entropy_coeff,
         "init_scale": args.init_scale,
         "anneal_lr": True if args.anneal_lr else None,
