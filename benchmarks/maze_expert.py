@@ -19,24 +19,29 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import torch
 
 from torchrl_causal.envs import AntMazeEnv, AntMazeExpert, HumanoidMazeEnv, HumanoidMazeExpert
 from torchrl_causal.evaluation import evaluate_policy
 
-#: per robot: its env, its expert, and the paper's expert rows (success %, mean successful
-#: length, its std, raw E[Y]).
+
+class Robot(NamedTuple):
+    env: type
+    expert: type
+    paper: dict[str, tuple[float, int, int, float]]  # per maze: success %, mean successful length, its std, raw E[Y]
+
+
 ROBOTS = {
-    "ant": (AntMazeEnv, AntMazeExpert, {"medium": (87.6, 301, 57, -104.0), "large": (55.9, 648, 99, -255.2)}),
-    "humanoid": (HumanoidMazeEnv, HumanoidMazeExpert, {"medium": (33.8, 976, 410, -522.9), "large": (7.0, 1463, 366, -840.6)}),
+    "ant": Robot(AntMazeEnv, AntMazeExpert, {"medium": (87.6, 301, 57, -104.0), "large": (55.9, 648, 99, -255.2)}),
+    "humanoid": Robot(HumanoidMazeEnv, HumanoidMazeExpert, {"medium": (33.8, 976, 410, -522.9), "large": (7.0, 1463, 366, -840.6)}),
 }
 
 
 def evaluate(robot: str, maze: str, regime: str, radius: float, episodes: int, batch: int, seed: int, weights: str | None):
-    env_class, expert_class, _ = ROBOTS[robot]
-    env = env_class(maze, batch_size=batch, regime=regime, seed=seed, success_radius=radius)
-    expert = expert_class(env, **({} if weights is None else {"weights": weights}))
+    env = ROBOTS[robot].env(maze, batch_size=batch, regime=regime, seed=seed, success_radius=radius)
+    expert = ROBOTS[robot].expert(env, **({} if weights is None else {"weights": weights}))
     result = evaluate_policy(env, expert, episodes=episodes, max_steps=env.horizon, regime=regime, seeds=(seed,))
     env.close()
     return result
@@ -61,12 +66,13 @@ def main() -> None:
         "| paper: success / length / E[Y] |",
         "| --- | ---: | --- | ---: | ---: | ---: | ---: | --- |",
     ]
+    robot = ROBOTS[args.robot]
     start = time.time()
     for maze in args.mazes:
         for radius in args.radius:
             for regime in args.regimes:
                 r = evaluate(args.robot, maze, regime, radius, args.episodes, args.batch, args.seed, args.weights)
-                p = ROBOTS[args.robot][2][maze]
+                p = robot.paper[maze]
                 paper = f"{p[0]}% / {p[1]} ± {p[2]} / {p[3]}" if regime == "train" else "—"
                 lines.append(
                     f"| {maze} | {radius:g} | {regime} | {r.n_episodes} | {100 * r.success_rate:.1f} ± "
@@ -79,10 +85,10 @@ def main() -> None:
     print(f"\n{table}\n\n{time.time() - start:.0f} s")
     if args.output:
         Path(args.output).write_text(
-            f"# Confounded {'AntMaze' if args.robot == 'ant' else 'HumanoidMaze'} expert (planner + trained locomotion skill)\n\n"
+            f"# Confounded {robot.env.__name__.removesuffix('Env')} expert (planner + trained locomotion skill)\n\n"
             f"Command ({time.time() - start:.0f} s on one core of a 2-core CPU machine):\n\n```\n{command}\n```\n\n"
             f"Seed {args.seed}; {args.episodes} episodes per row (the first episode of each of {args.batch} "
-            f"parallel envs per round), horizon {ROBOTS[args.robot][0].default_horizon}, deterministic expert.\n\n" + table + "\n"
+            f"parallel envs per round), horizon {robot.env.default_horizon}, deterministic expert.\n\n" + table + "\n"
         )
 
 
