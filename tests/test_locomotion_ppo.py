@@ -7,6 +7,8 @@ folded layers), counts that follow from the config, and what travels in the resu
 from __future__ import annotations
 
 import json
+import math
+from dataclasses import replace
 
 import pytest
 import torch
@@ -179,3 +181,41 @@ def test_the_command_line_sets_the_config_it_names(tmp_path, monkeypatch) -> Non
     assert config.lmbda == PPOLocomotionConfig().lmbda and seen["init_from"] == "parent.pt"
     with pytest.raises(ValueError, match="need 0 < gamma < 1"):
         locomotion_ppo.main(["--run-dir", str(tmp_path), "--gamma", "1.0"])
+
+
+def test_the_commands_widen_at_each_evaluation_that_reaches_the_gate(tmp_path, monkeypatch) -> None:
+    import torchrl_causal.envs.locomotion_ppo as ppo
+
+    # Upright speeds 0.4 (gate met), 0.1 (not), 0.5 (met), 0.5 (met, but pi is the ceiling) at 2, 4, 6 and 8 batches.
+    speeds = iter([0.4, 0.1, 0.5, 0.5])
+    spreads_evaluated = []
+
+    def fake_evaluation(*args, env_options, **kwargs):
+        spreads_evaluated.append(env_options["command_spread"])
+        return {"speed": next(speeds), "fall_rate": 0.0, "steps_to_fall": 10.0}
+
+    envs = []
+    humanoid = SKILLS["humanoid"]
+    skill = replace(humanoid, make_env=lambda *args, **kwargs: envs.append(humanoid.make_env(*args, **kwargs)) or envs[-1])
+    monkeypatch.setattr(ppo, "evaluate_locomotion", fake_evaluation)
+    config = _config(8 * FRAMES, command_spread=0.0, widen_gate=0.3, widen_step=2.0)
+    record = train_locomotion_ppo(tmp_path, config, skill=skill, progress_bar=False)
+    assert spreads_evaluated == pytest.approx([0.0, 2.0, 2.0, math.pi])
+    assert envs[0].command_spread == pytest.approx(math.pi)  # the training commands widened with them
+    state = torch.load(tmp_path / "resume_state.pt", weights_only=True)
+    assert state["counters"]["command_spread"] == pytest.approx(math.pi)
+    assert record["best_eval_score"] == pytest.approx(0.5)  # the widest spread's best, selected afresh
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"widen_gate": 0.3}, "needs a command_spread below pi"),
+        ({"widen_gate": 0.3, "command_spread": math.pi}, "needs a command_spread below pi"),
+        ({"widen_gate": 0.0, "command_spread": 0.0}, "need widen_gate > 0"),
+        ({"widen_gate": 0.3, "command_spread": 0.0, "widen_step": 0.0}, "0 < widen_step <= pi"),
+    ],
+)
+def test_a_curriculum_without_room_to_widen_is_refused_in_one_line(change, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        _config(FRAMES, **change)

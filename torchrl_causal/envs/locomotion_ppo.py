@@ -84,6 +84,11 @@ class PPOLocomotionConfig:
     humanoid within ~1 s); ``anneal_lr`` decays the learning rate linearly to 0 over ``total_steps``;
     ``speed_weight`` (``None``: the env's default) weighs the speed term of the skill env's reward;
     ``command_spread`` (``None``: uniform commands) bounds the angle between a command and the heading.
+    ``widen_gate`` (``None``: the spread stays put) makes one run its own curriculum: at each
+    evaluation, on the current commands, whose :func:`~torchrl_causal.envs.locomotion.upright_speed`
+    reaches the gate, the spread widens by ``widen_step`` for the rest of the run, up to pi (uniform,
+    the skill's task). Each spread selects its own best body (a wider one is a harder task, so
+    scores across spreads do not compare): the export is the best at the widest spread reached.
     """
 
     total_steps: int = 30_000_000
@@ -104,6 +109,8 @@ class PPOLocomotionConfig:
     anneal_lr: bool = False
     speed_weight: float | None = None
     command_spread: float | None = None
+    widen_gate: float | None = None
+    widen_step: float = math.pi / 4
     eval_every: int = 500_000
     eval_envs: int = 8
     eval_steps: int = 400
@@ -129,6 +136,11 @@ class PPOLocomotionConfig:
             raise ValueError(f"speed_weight must be >= 0, got {self.speed_weight}")
         if self.command_spread is not None and not 0 <= self.command_spread <= math.pi:
             raise ValueError(f"command_spread must lie in [0, pi], got {self.command_spread}")
+        if self.widen_gate is not None:
+            if self.command_spread is None or self.command_spread >= math.pi:
+                raise ValueError(f"widen_gate needs a command_spread below pi to widen from, got {self.command_spread}")
+            if not self.widen_gate > 0 or not 0 < self.widen_step <= math.pi:
+                raise ValueError(f"need widen_gate > 0 and 0 < widen_step <= pi, got {self.widen_gate}, {self.widen_step}")
 
     @property
     def env_options(self) -> dict[str, Any]:
@@ -296,7 +308,14 @@ def train_locomotion_ppo(
     loss.set_keys(sample_log_prob="action_log_prob")
     advantage = GAE(gamma=config.gamma, lmbda=config.lmbda, value_network=value, average_gae=False)
     optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
-    counters: dict[str, Any] = {"steps": 0, "iterations": 0, "best_score": -math.inf, "collect_seed": config.seed}
+    # command_spread is the curriculum's current spread (``widen_gate``); a new stage starts at its own.
+    counters: dict[str, Any] = {
+        "steps": 0,
+        "iterations": 0,
+        "best_score": -math.inf,
+        "collect_seed": config.seed,
+        "command_spread": config.command_spread,
+    }
 
     state_path = run_dir / _RESUME_STATE
     source = state_path if state_path.exists() else (Path(resume_from) if resume_from is not None else None)
@@ -344,22 +363,37 @@ def train_locomotion_ppo(
             state["best_body"] = torch.load(best, weights_only=True)
         atomic_save(state, state_path)
 
+    def env_options() -> dict[str, Any]:
+        spread = counters["command_spread"]
+        return {**config.env_options, **({} if spread is None else {"command_spread": spread})}
+
     def evaluate() -> dict[str, float]:
         folded = fold_observation_normalisation(norm, body)
         # On the run's own task (a curriculum stage's commands); the final stage's is the skill's.
-        result = evaluate_locomotion(folded, skill=skill, envs=config.eval_envs, steps=config.eval_steps, env_options=config.env_options)
+        result = evaluate_locomotion(folded, skill=skill, envs=config.eval_envs, steps=config.eval_steps, env_options=env_options())
         score = upright_speed(result)
         if score > counters["best_score"]:
             counters["best_score"] = score
             atomic_save(folded.state_dict(), run_dir / BEST_BODY)
-        return result
+        spread = counters["command_spread"]
+        if config.widen_gate is not None and spread is not None and spread < math.pi and score >= config.widen_gate:
+            counters["command_spread"] = min(math.pi, spread + config.widen_step)
+            counters["best_score"] = -math.inf  # the wider spread selects its own best
+            log.info(
+                "[%s ppo] upright speed %.3f >= %.3f: commands widen to %.4f rad",
+                skill.name,
+                score,
+                config.widen_gate,
+                counters["command_spread"],
+            )
+        return {**result, **({} if spread is None else {"command_spread": spread})}
 
     logger = CSVLogger(exp_name="ppo", log_dir=str(run_dir / "logs"))
     remaining = config.total_steps - counters["steps"]
     if remaining > 0:
         # A resumed run draws fresh episodes from a new seed (the simulations are not saved).
         counters["collect_seed"] += 1
-        env = skill.make_env(config.num_envs, counters["collect_seed"], **config.env_options)
+        env = skill.make_env(config.num_envs, counters["collect_seed"], **env_options())
         collector = Collector(
             env,
             actor,
@@ -388,6 +422,8 @@ def train_locomotion_ppo(
             steps = counters["steps"]
             if steps % config.eval_every < config.frames_per_batch or steps >= config.total_steps:
                 metrics.update({f"eval_{k}": v for k, v in evaluate().items()})
+                if counters["command_spread"] is not None:
+                    env.command_spread = counters["command_spread"]  # a widened curriculum, from the next batch on
                 save()
                 last_save = time.monotonic()
             elif time.monotonic() - last_save > 60 * config.checkpoint_minutes:
@@ -461,6 +497,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--command-spread", type=float, default=None, help="max angle (rad) between a command and the heading (humanoid; default pi)"
     )
+    parser.add_argument(
+        "--widen-gate", type=float, default=None, help="upright speed (m/s) at an evaluation that widens the commands (a curriculum)"
+    )
+    parser.add_argument("--widen-step", type=float, default=None, help="radians the commands widen by at the gate (default pi/4)")
+    parser.add_argument("--eval-envs", type=int, default=None, help="simulations per evaluation (default 8)")
     parser.add_argument("--init-from", default=None, help="a PPO resume_state.pt whose learner starts this new run (a curriculum stage)")
     parser.add_argument(
         "--output", default=None, help="where the best folded policy body is exported (default: the skill's weights in the package)"
@@ -484,6 +525,9 @@ def main(argv: list[str] | None = None) -> None:
         "anneal_lr": True if args.anneal_lr else None,
         "speed_weight": args.speed_weight,
         "command_spread": args.command_spread,
+        "widen_gate": args.widen_gate,
+        "widen_step": args.widen_step,
+        "eval_envs": args.eval_envs,
     }
     config = replace(PPOLocomotionConfig(), **{k: v for k, v in overrides.items() if v is not None})
     record = train_locomotion_ppo(
