@@ -21,7 +21,8 @@ from tensordict import MemoryMappedTensor, TensorDict
 from torchrl_causal.data import read_metadata
 from torchrl_causal.evaluation import load_runs, write_report
 from torchrl_causal.evaluation.evaluator import Evaluator
-from torchrl_causal.evaluation.runs import read_scalar_csv
+from torchrl_causal.evaluation.runs import carry_runs, read_scalar_csv
+from torchrl_causal.cli.archive import main as archive_main
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.experiment import (
     CheckpointError,
@@ -557,3 +558,35 @@ def trainer_sees(cfg) -> int:
     trainer = build_trainer(cfg)
     trainer.setup()
     return len(trainer.expert_buffer)
+
+
+def test_a_run_carried_without_its_replay_buffer_refills_it_and_finishes(tmp_path: Path, caplog) -> None:
+    # The SQIL tiny run collects 40 env steps per iteration; interrupted after 6 iterations, it
+    # is carried (python -m torchrl_causal.archive carry=true) to another "machine" and resumed there.
+    extra = ("algo.total_steps=400", "algo.buffer_size=400", "checkpoint_every_s=3600")
+    cfg = tiny_config(tmp_path / "here", "rovermaze_u", "sqil", True, *extra)
+    with _interrupt_at(get_class(cfg.algo.trainer), 6), pytest.raises(RunInterrupted):
+        run(cfg)
+    carried = archive_main(["runs=" + str(tmp_path / "here"), "out=" + str(tmp_path / "carried"), "carry=true"])
+    assert len(carried) == 1 and (carried[0] / "checkpoints" / "last.pt").is_file() and not (carried[0] / "replay").exists()
+    assert RunDirectory(cfg.run_dir).replay_dir.is_dir()  # left behind, not moved
+    there = tiny_config(tmp_path / "carried", "rovermaze_u", "sqil", True, *extra, f"demos.path={cfg.demos.path}")
+    assert Path(there.run_dir) == carried[0]
+    with caplog.at_level("WARNING"):
+        results = run(there)
+    assert any("has no replay buffer" in record.getMessage() for record in caplog.records)
+    state = load_checkpoint(Path(there.run_dir) / "checkpoints" / "last.pt")
+    refill = min(240, max(there.algo.random_steps, there.algo.batch_size))
+    refilled = -(-refill // 40) * 40  # whole collector batches
+    assert state["progress"] == 400 and state["training"]["refilled_steps"] == refilled
+    # The buffer held the refill, then every step from 240 on: nothing was counted twice.
+    assert state["training"]["policy_buffer_len"] == refilled + 400 - 240
+    assert len(results["deploy"].returns) == there.eval.final_episodes and RunDirectory(there.run_dir).read_status()["status"] == "complete"
+
+
+def test_carry_refuses_what_it_cannot_do_in_one_line(tmp_path: Path) -> None:
+    (tmp_path / "runs").mkdir()
+    with pytest.raises(SystemExit, match="^error: carry=true copies every checkpoint already; leave out policies=true$"):
+        archive_main(["runs=" + str(tmp_path / "runs"), "out=" + str(tmp_path / "out"), "carry=true", "policies=true"])
+    with pytest.raises(ValueError, match="must not contain one another"):
+        carry_runs(tmp_path / "runs", tmp_path / "runs" / "inside")

@@ -11,6 +11,11 @@ records live in ``results/runs/``: ``run_root=runs/table3`` archives with
 ``out=results/runs/table3``. With ``policies=true`` each run's selected policy (the actor's
 weights, ``checkpoints/best.pt``) is copied too: the shipped policies in ``results/policies/``
 are such archives, which ``python -m torchrl_causal.evaluate run_dir=<archived run>`` evaluates.
+
+With ``carry=true`` it copies instead every run that has a checkpoint, finished or not, whole
+but for its replay buffer (:func:`~torchrl_causal.evaluation.runs.carry_runs`): what continues
+the run on another machine, where the same ``train`` command resumes it after the runs are
+copied back below its ``run_root``.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
-from torchrl_causal.evaluation.runs import archive_runs
+from torchrl_causal.evaluation.runs import archive_runs, carry_runs
 
 __all__ = ["OPTIONS", "main"]
 
@@ -27,17 +32,22 @@ OPTIONS: dict[str, Option] = {
     "runs": Option(str, placeholder="<dir>"),
     "out": Option(str, placeholder="<dir>"),
     "policies": Option(bool, False),
+    "carry": Option(bool, False),
 }
 
 
 def main(argv: Sequence[str] | None = None) -> list[Path]:
     args = parse_arguments("archive", argv_or_sys(argv), OPTIONS)
     with one_line_errors():
-        archived = archive_runs(args["runs"], args["out"], policies=args["policies"])
+        if args["carry"] and args["policies"]:
+            raise ValueError("carry=true copies every checkpoint already; leave out policies=true")
+        archived = (
+            carry_runs(args["runs"], args["out"]) if args["carry"] else archive_runs(args["runs"], args["out"], policies=args["policies"])
+        )
     size = sum(path.stat().st_size for run in archived for path in run.rglob("*") if path.is_file())
     for run in archived:
         print(run)
-    print(f"archived {len(archived)} run(s) below {args['out']} ({size / 1e6:.1f} MB)")
+    print(f"{'carried' if args['carry'] else 'archived'} {len(archived)} run(s) below {args['out']} ({size / 1e6:.1f} MB)")
     return archived
 
 

@@ -20,7 +20,11 @@ configs), so none runs at learning rate zero. The actor collects in eval mode
 (:func:`~torchrl_causal.objectives.add_absorbing_transitions`).
 
 The policy buffer is a memory-mapped TorchRL storage in the run directory
-(``replay/``): a checkpoint records its length and write cursor, never its contents.
+(``replay/``): a checkpoint records its length and write cursor, never its contents. A run
+carried to another machine without it (``python -m torchrl_causal.archive carry=true``: the
+run directory less ``replay/``) resumes from its checkpoint and first refills the buffer from
+the current policy, ``max(algo.random_steps, algo.batch_size)`` transitions (at most what it held)
+that count toward no budget and are recorded as ``refilled_steps``; such a resume is not exact.
 
 Networks, losses, optimisers and the expert buffer live on ``cfg.device``; batches
 sampled from the (CPU, memory-mapped) policy buffer are moved there. The envs step on
@@ -159,6 +163,9 @@ class OffPolicyILTrainer(Trainer):
             transform=operator.methodcaller("to", self.device),
         )
         self.log_every = self.cfg.log_every
+        # A run resumed without its replay buffer collects this many transitions before updating.
+        self.refill_target = 0
+        self.refilled_steps = 0
         self._reset_scalar_sums()
         # One worker: built now, so that resume can load the episodes in flight into it.
         # Several: built at the first step, from the progress resume has restored.
@@ -252,11 +259,8 @@ class OffPolicyILTrainer(Trainer):
         """An update's batch: the expert half, then the policy half."""
         return torch.cat([self.expert_buffer.sample(), self.policy_buffer.sample()], dim=0)
 
-    def train_step(self) -> Mapping[str, torch.Tensor]:
-        # A fresh run's warm start: progress and the update count say whether each part ran,
-        # so a run resumed from a checkpoint never repeats one.
-        if self.warm_start and self.progress == 0 and self.warm_start.bc_updates:
-            self.clone_expert_actions()
+    def _collect(self) -> TensorDictBase:
+        """One collector batch of the current policy, stored in the policy buffer."""
         with eval_mode(self.policy):
             if self.collector is None:
                 self.collector = self._make_collector()
@@ -267,6 +271,24 @@ class OffPolicyILTrainer(Trainer):
         transitions = batch.reshape(-1).select(*_COLLECTED_KEYS)
         transitions.set("expert", torch.zeros((*transitions.batch_size, 1), dtype=torch.bool, device=transitions.device))
         self.policy_buffer.extend(self._replay_format(transitions.exclude(("next", "reward"))))
+        return transitions
+
+    def refill_policy_buffer(self) -> None:
+        """Collects with the current policy, without updating or counting progress, until the
+        buffer holds :attr:`refill_target` transitions (a run resumed without its buffer)."""
+        while len(self.policy_buffer) < self.refill_target:
+            self.refilled_steps += self._collect().numel()
+        log.info("refilled the replay buffer with %d transitions of the current policy", len(self.policy_buffer))
+        self.refill_target = 0
+
+    def train_step(self) -> Mapping[str, torch.Tensor]:
+        # A fresh run's warm start: progress and the update count say whether each part ran,
+        # so a run resumed from a checkpoint never repeats one.
+        if self.warm_start and self.progress == 0 and self.warm_start.bc_updates:
+            self.clone_expert_actions()
+        if self.refill_target:
+            self.refill_policy_buffer()
+        transitions = self._collect()
         self.progress += transitions.numel()
         self.scalar_sums[0] += transitions["next", "reward"].mean()
         self.batches_since_log += 1
@@ -297,6 +319,7 @@ class OffPolicyILTrainer(Trainer):
             "loss": self.loss.state_dict(),
             **self.update.state_dict(),
             "policy_buffer_len": len(self.policy_buffer),
+            "refilled_steps": self.refilled_steps,
             "collector": self._built_collector().state_dict() if self.workers == 1 else {},
             "scalar_sums": self.scalar_sums,
             "batches_since_log": self.batches_since_log,
@@ -306,7 +329,19 @@ class OffPolicyILTrainer(Trainer):
     def load_training_state(self, state: Mapping[str, Any]) -> None:
         self.loss.load_state_dict(state["loss"])
         self.update.load_state_dict(state)
-        if state["policy_buffer_len"]:
+        # Checkpoints written before a carried run could refill its buffer hold no count.
+        self.refilled_steps = int(state.get("refilled_steps", 0))
+        if state["policy_buffer_len"] and not self.run.replay_dir.exists():
+            # Carried to another machine without its buffer (never shipped: gigabytes).
+            algo = self.cfg.algo
+            self.refill_target = min(int(state["policy_buffer_len"]), max(int(algo.random_steps), int(algo.batch_size)))
+            log.warning(
+                "%s has no replay buffer (a run carried from another machine?): refilling %d transitions from the current "
+                "policy before the next update; this resume is not exact",
+                self.run.path,
+                self.refill_target,
+            )
+        elif state["policy_buffer_len"]:
             try:
                 self.policy_buffer.loads(self.run.replay_dir)
             except (OSError, ValueError, KeyError) as error:
