@@ -568,7 +568,8 @@ def test_a_run_carried_without_its_replay_buffer_refills_it_and_finishes(tmp_pat
     with _interrupt_at(get_class(cfg.algo.trainer), 6), pytest.raises(RunInterrupted):
         run(cfg)
     carried = archive_main(["runs=" + str(tmp_path / "here"), "out=" + str(tmp_path / "carried"), "carry=true"])
-    assert len(carried) == 1 and (carried[0] / "checkpoints" / "last.pt").is_file() and not (carried[0] / "replay").exists()
+    assert len(carried) == 1 and (carried[0] / "checkpoints" / "last.pt").is_file()
+    assert not (carried[0] / "replay").exists() and not RunDirectory(carried[0]).lock_file.exists()
     assert RunDirectory(cfg.run_dir).replay_dir.is_dir()  # left behind, not moved
     there = tiny_config(tmp_path / "carried", "rovermaze_u", "sqil", True, *extra, f"demos.path={cfg.demos.path}")
     assert Path(there.run_dir) == carried[0]

@@ -311,8 +311,9 @@ def carry_runs(root: str | Path, out: str | Path) -> list[Path]:
 
 
 def _replay_names(folder: Path, names: Sequence[str], run: RunDirectory) -> list[str]:
-    """The entries of ``folder`` that :func:`carry_runs` leaves behind: the run's replay buffer."""
-    return [name for name in names if folder / name == run.replay_dir]
+    """The entries of ``folder`` that :func:`carry_runs` leaves behind: the run's replay buffer
+    and its lock file (it names this machine's process)."""
+    return [name for name in names if folder / name in (run.replay_dir, run.lock_file)]
 
 
 def mean_curve(curves: Iterable[Sequence[tuple[int, float]]]) -> list[tuple[int, float]]:

@@ -320,6 +320,10 @@ class RunDirectory:
         return self.path / REPLAY_DIR
 
     @property
+    def lock_file(self) -> Path:
+        return self.path / LOCK_FILE
+
+    @property
     def train_curve_file(self) -> Path:
         return self.log_dir / "scalars" / f"{TRAIN_CURVE}.csv"
 
@@ -430,7 +434,7 @@ class RunDirectory:
             refused
         """
         self.path.mkdir(parents=True, exist_ok=True)
-        handle = open(self.path / LOCK_FILE, "a+")
+        handle = open(self.lock_file, "a+")
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
