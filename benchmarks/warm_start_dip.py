@@ -17,7 +17,10 @@ Variants: ``critics_only`` (the actor held), ``anchor_actor_loss`` (the anchor s
 ``|loss_actor|``: the recipe, ``algo.loss.bc_scale=actor_loss``), ``anchor_expert_value``
 (scaled by the constant ``r_E / (1 - gamma)``: holds the cloned actor here, but a full run ends
 lower, results/antmaze_medium_recipe.md), ``anchor_expert_value_x6`` (weight 2.5 instead of
-0.4), ``no_anchor``, ``actor_lr_div10`` (the recipe with the actor's learning rate / 10).
+0.4), ``no_anchor``, ``actor_lr_div10`` (the recipe with the actor's learning rate / 10),
+``no_goal_value`` (the recipe with the goal worth 0, the paper's objective, from the same
+snapshot) and ``critic_fit_x5`` (the recipe after 20000 more critic-only updates: is the dip the
+critics' distance from the goal-valued fixed point, which 5000 updates do not close?).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from __future__ import annotations
 import argparse
 import copy
 import time
+from typing import NamedTuple
 
 import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
@@ -38,14 +42,25 @@ from torchrl_causal.trainers.off_policy import OffPolicyILTrainer
 
 DEFAULT_OVERRIDES = ["env=antmaze_medium", "+row=c_sqil", "scale=cpu_ant", "+recipe=goal_valued_bc_anchored"]
 
-#: name -> (bc_weight, bc_scale, actor learning-rate factor, actor updated)
+
+class Variant(NamedTuple):
+    bc_weight: float | None
+    bc_scale: str
+    actor_lr_factor: float = 1.0
+    actor_moves: bool = True
+    goal_value: str | None = "expert"
+    extra_critic_updates: int = 0  # critic-only updates before the joint ones
+
+
 VARIANTS = {
-    "critics_only": (0.4, "expert_value", 1.0, False),
-    "anchor_actor_loss": (0.4, "actor_loss", 1.0, True),
-    "anchor_expert_value": (0.4, "expert_value", 1.0, True),
-    "anchor_expert_value_x6": (2.5, "expert_value", 1.0, True),
-    "no_anchor": (None, "expert_value", 1.0, True),
-    "actor_lr_div10": (0.4, "actor_loss", 0.1, True),
+    "critics_only": Variant(0.4, "expert_value", actor_moves=False),
+    "anchor_actor_loss": Variant(0.4, "actor_loss"),
+    "anchor_expert_value": Variant(0.4, "expert_value"),
+    "anchor_expert_value_x6": Variant(2.5, "expert_value"),
+    "no_anchor": Variant(None, "expert_value"),
+    "actor_lr_div10": Variant(0.4, "actor_loss", actor_lr_factor=0.1),
+    "no_goal_value": Variant(0.4, "actor_loss", goal_value=None),
+    "critic_fit_x5": Variant(0.4, "actor_loss", extra_critic_updates=20_000),
 }
 
 
@@ -89,16 +104,18 @@ def main() -> None:
     print("|---|---|---|---|---|---|")
     baseline = None
     for name in args.variants:
-        weight, scale, lr_factor, actor_moves = VARIANTS[name]
+        variant = VARIANTS[name]
         loss.load_state_dict(snapshot[0])
         update.load_state_dict(snapshot[1])
-        loss.bc_weight, loss.bc_scale = weight, scale
+        loss.bc_weight, loss.bc_scale, loss.goal_value = variant.bc_weight, variant.bc_scale, variant.goal_value
         for group in update.actor_optimizer.param_groups:
-            group["lr"] *= lr_factor
+            group["lr"] *= variant.actor_lr_factor
         torch.manual_seed(1)
         start = time.perf_counter()
+        for _ in range(variant.extra_critic_updates):
+            update.critic_step(trainer.sample_batch())
         for _ in range(args.updates):
-            (update if actor_moves else update.critic_step)(trainer.sample_batch())
+            (update if variant.actor_moves else update.critic_step)(trainer.sample_batch())
         seconds = time.perf_counter() - start
         moved = [(now - before).pow(2).mean(-1).sqrt() for now, before in zip(deterministic_actions(trainer, fixed), reference)]
         expert_move = torch.cat([m[e] for m, (e, _) in zip(moved, rows)]).mean().item()
