@@ -21,7 +21,7 @@ from tensordict import MemoryMappedTensor, TensorDict
 from torchrl_causal.data import read_metadata
 from torchrl_causal.evaluation import load_runs, write_report
 from torchrl_causal.evaluation.evaluator import Evaluator
-from torchrl_causal.evaluation.runs import carry_runs, read_scalar_csv
+from torchrl_causal.evaluation.runs import read_scalar_csv
 from torchrl_causal.cli.archive import main as archive_main
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.experiment import (
@@ -34,6 +34,7 @@ from torchrl_causal.experiment import (
     compose_config,
     load_checkpoint,
 )
+from torchrl_causal.experiment.run_directory import carry_runs
 from torchrl_causal.experiment.builders import make_window
 from torchrl_causal.lifecycle import run
 from torchrl_causal.trainers import Trainer

@@ -13,7 +13,7 @@ weights, ``checkpoints/best.pt``) is copied too: the shipped policies in ``resul
 are such archives, which ``python -m torchrl_causal.evaluate run_dir=<archived run>`` evaluates.
 
 With ``carry=true`` it copies instead every run that has a checkpoint, finished or not, whole
-but for its replay buffer (:func:`~torchrl_causal.evaluation.runs.carry_runs`): what continues
+but for its replay buffer (:func:`~torchrl_causal.experiment.run_directory.carry_runs`): what continues
 the run on another machine, where the same ``train`` command resumes it after the runs are
 copied back below its ``run_root``.
 """
@@ -24,7 +24,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
-from torchrl_causal.evaluation.runs import archive_runs, carry_runs
+from torchrl_causal.evaluation.runs import archive_runs
+from torchrl_causal.experiment.run_directory import carry_runs
 
 __all__ = ["OPTIONS", "main"]
 

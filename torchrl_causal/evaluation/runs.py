@@ -12,7 +12,6 @@ from __future__ import annotations
 import csv
 import logging
 import math
-import shutil
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +22,7 @@ from omegaconf import OmegaConf
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.experiment.run_directory import (
     CONFIG_FILE,
+    copy_folders,
     CheckpointError,
     RunDirectory,
     atomic_save,
@@ -40,7 +40,6 @@ __all__ = [
     "load_run",
     "load_runs",
     "archive_runs",
-    "carry_runs",
     "copy_selected_policy",
     "POLICY_CHECKPOINT_KEYS",
     "mean_curve",
@@ -256,11 +255,7 @@ def archive_runs(root: str | Path, out: str | Path, *, policies: bool = False) -
          'rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0/eval/deploy.json',
          'rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0/status.json']
     """
-    root, out = Path(root).resolve(), Path(out).resolve()
-    if not root.exists():
-        raise FileNotFoundError(f"runs folder {root} does not exist")
-    if out.is_relative_to(root) or root.is_relative_to(out):  # equal folders included
-        raise ValueError(f"archive folder {out} and runs folder {root} must not contain one another")
+    root, out = copy_folders(root, out)
     archived = []
     for run in _complete_runs(root):
         target = out / run.path.relative_to(root)
@@ -276,44 +271,6 @@ def archive_runs(root: str | Path, out: str | Path, *, policies: bool = False) -
                 stale.unlink()
         archived.append(target)
     return archived
-
-
-def carry_runs(root: str | Path, out: str | Path) -> list[Path]:
-    """Copies every run below ``root`` that has a checkpoint, complete or not, to the same
-    relative path below ``out``, all of it but its replay buffer, and returns the copies.
-
-    That is what continues a run on another machine: its config, record, logs and
-    ``checkpoints/`` (the networks, optimisers and counters, a few MB at ``scale=cpu_ant``),
-    without ``replay/`` (gigabytes). Copy the carried runs back below the ``run_root`` of the
-    same ``train`` command there: the run resumes from ``checkpoints/last.pt``, refills its
-    replay buffer from its current policy first, and records the refill
-    (:class:`~torchrl_causal.trainers.OffPolicyILTrainer`). A complete run whose budget can grow
-    is carried the same way, to be continued with a larger budget.
-
-    Raises:
-        FileNotFoundError: ``root`` does not exist.
-        ValueError: one of ``root`` and ``out`` lies inside the other.
-    """
-    root, out = Path(root).resolve(), Path(out).resolve()
-    if not root.exists():
-        raise FileNotFoundError(f"runs folder {root} does not exist")
-    if out.is_relative_to(root) or root.is_relative_to(out):
-        raise ValueError(f"carry folder {out} and runs folder {root} must not contain one another")
-    carried = []
-    for config_file in sorted(root.rglob(CONFIG_FILE)):
-        run = RunDirectory(config_file.parent)
-        if not run.last_checkpoint.is_file():
-            continue
-        target = out / run.path.relative_to(root)
-        shutil.copytree(run.path, target, ignore=lambda folder, names, run=run: _replay_names(Path(folder), names, run), dirs_exist_ok=True)
-        carried.append(target)
-    return carried
-
-
-def _replay_names(folder: Path, names: Sequence[str], run: RunDirectory) -> list[str]:
-    """The entries of ``folder`` that :func:`carry_runs` leaves behind: the run's replay buffer
-    and its lock file (it names this machine's process)."""
-    return [name for name in names if folder / name in (run.replay_dir, run.lock_file)]
 
 
 def mean_curve(curves: Iterable[Sequence[tuple[int, float]]]) -> list[tuple[int, float]]:

@@ -65,6 +65,8 @@ __all__ = [
     "RunInUseError",
     "atomic_save",
     "atomic_write_text",
+    "carry_runs",
+    "copy_folders",
     "MOVED_KEYS",
     "changed_keys",
     "load_checkpoint",
@@ -559,3 +561,45 @@ class RunDirectory:
         """The last (or best) checkpoint loaded onto ``map_location``, ``None`` when there is none."""
         path = self.best_checkpoint if best else self.last_checkpoint
         return load_checkpoint(path, map_location) if path.is_file() else None
+
+
+def copy_folders(root: str | Path, out: str | Path) -> tuple[Path, Path]:
+    """``root`` (runs to copy) and ``out`` (where to), resolved; refused when ``root`` is
+    missing (``FileNotFoundError``) or one contains the other, equal folders included (``ValueError``)."""
+    root, out = Path(root).resolve(), Path(out).resolve()
+    if not root.exists():
+        raise FileNotFoundError(f"runs folder {root} does not exist")
+    if out.is_relative_to(root) or root.is_relative_to(out):
+        raise ValueError(f"copy folder {out} and runs folder {root} must not contain one another")
+    return root, out
+
+
+def carry_runs(root: str | Path, out: str | Path) -> list[Path]:
+    """Copies every run below ``root`` that has a checkpoint, complete or not, to the same
+    relative path below ``out``, all of it but its replay buffer and lock, and returns the copies.
+
+    That is what continues a run on another machine: its config, record, logs and
+    ``checkpoints/`` (the networks, optimisers and counters, a few MB at ``scale=cpu_ant``),
+    without ``replay/`` (gigabytes) or ``.lock`` (it names this machine's process). Copy the
+    carried runs back below the ``run_root`` of the same ``train`` command there: the
+    off-policy imitators resume from ``checkpoints/last.pt``, refill their replay buffer from
+    the current policy first and record the refill. A complete run whose budget can grow is
+    carried the same way, to be continued with a larger budget.
+
+    Raises:
+        FileNotFoundError: ``root`` does not exist.
+        ValueError: one of ``root`` and ``out`` lies inside the other.
+    """
+    root, out = copy_folders(root, out)
+    carried = []
+    for config_file in sorted(root.rglob(CONFIG_FILE)):
+        run = RunDirectory(config_file.parent)
+        if not run.last_checkpoint.is_file():
+            continue
+        left_behind = (run.replay_dir, run.lock_file)
+        target = out / run.path.relative_to(root)
+        shutil.copytree(
+            run.path, target, ignore=lambda folder, names: [n for n in names if Path(folder) / n in left_behind], dirs_exist_ok=True
+        )
+        carried.append(target)
+    return carried
