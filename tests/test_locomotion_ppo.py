@@ -17,9 +17,12 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from torchrl_causal.envs.locomotion import SKILLS, make_locomotion_actor
 from torchrl_causal.envs.locomotion_ppo import (
+    ADAPTIVE_LR_BOUNDS,
     PPOLocomotionConfig,
+    adapt_learning_rate,
     RunningNormalisation,
     fold_observation_normalisation,
+    gaussian_kl,
     make_ppo_actor,
     train_locomotion_ppo,
 )
@@ -103,6 +106,8 @@ def test_resume_refuses_another_config_or_a_sac_state(tmp_path) -> None:
         ({"gamma": 1.0}, "0 < gamma < 1"),
         ({"init_scale": 0.0}, "init_scale must be > 0.01"),
         ({"command_spread": -0.1}, r"command_spread must lie in \[0, pi\]"),
+        ({"desired_kl": 0.0}, "desired_kl must be > 0"),
+        ({"desired_kl": 0.01, "anneal_lr": True}, "excludes anneal_lr"),
     ],
 )
 def test_bad_configs_are_refused_in_one_line(change, message) -> None:
@@ -129,6 +134,42 @@ def test_annealing_decays_the_learning_rate_linearly_to_zero(tmp_path) -> None:
     plain = train_locomotion_ppo(tmp_path / "b", _config(FRAMES), progress_bar=False)
     assert plain["steps"] == FRAMES
     assert torch.load(tmp_path / "b" / "resume_state.pt", weights_only=True)["optimizer"]["param_groups"][0]["lr"] == 3e-4
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_update_kl_is_torchs_kl_of_the_two_gaussians(seed: int) -> None:
+    generator = torch.Generator().manual_seed(seed)
+    loc, other_loc = torch.randn(2, 7, 21, generator=generator)
+    scale, other_scale = 0.05 + torch.rand(2, 7, 21, generator=generator)
+    reference = torch.distributions.kl_divergence(
+        torch.distributions.Normal(loc, scale), torch.distributions.Normal(other_loc, other_scale)
+    ).sum(-1)
+    torch.testing.assert_close(gaussian_kl(loc, scale, other_loc, other_scale), reference)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_adaptive_learning_rate_moves_against_the_kl_and_stays_in_bounds(seed: int) -> None:
+    generator = torch.Generator().manual_seed(seed)
+    lr, desired = 10 ** (-5 + 3 * torch.rand((), generator=generator).item()), 0.01
+    kl = desired * 10 ** (2 * torch.rand((), generator=generator).item() - 1)  # 0.1x to 10x the target
+    new = adapt_learning_rate(lr, kl, desired)
+    low, high = ADAPTIVE_LR_BOUNDS
+    expected = max(low, lr / 1.5) if kl > 2 * desired else min(high, lr * 1.5) if kl < desired / 2 else lr
+    assert new == pytest.approx(expected) and low <= new <= high
+
+
+def test_a_kl_adaptive_run_cools_its_learning_rate_when_each_step_moves_the_policy_too_far(tmp_path) -> None:
+    # A learning rate of 0.01 on a 16-unit body moves the policy far more than a KL of 1e-6 in a
+    # batch's update: each of the 3 batches divides the rate by 1.5.
+    config = _config(3 * FRAMES, lr=1e-2, desired_kl=1e-6)
+    train_locomotion_ppo(tmp_path / "a", config, progress_bar=False)
+    lr = torch.load(tmp_path / "a" / "resume_state.pt", weights_only=True)["optimizer"]["param_groups"][0]["lr"]
+    assert lr == pytest.approx(1e-2 / 1.5**3)
+    logged = (tmp_path / "a" / "logs" / "ppo" / "scalars" / "lr.csv").read_text().splitlines()
+    assert [float(line.split(",")[1]) for line in logged] == pytest.approx([1e-2 / 1.5, 1e-2 / 1.5**2, 1e-2 / 1.5**3])
+    # A target no update can exceed raises it instead, up to the bound.
+    train_locomotion_ppo(tmp_path / "b", _config(3 * FRAMES, lr=5e-3, desired_kl=100.0), progress_bar=False)
+    assert torch.load(tmp_path / "b" / "resume_state.pt", weights_only=True)["optimizer"]["param_groups"][0]["lr"] == ADAPTIVE_LR_BOUNDS[1]
 
 
 def test_a_run_started_from_another_runs_learner_continues_its_steps_under_its_own_config(tmp_path) -> None:

@@ -60,9 +60,12 @@ from torchrl_causal.experiment.run_directory import atomic_save, load_checkpoint
 from torchrl_causal.progress import progress
 
 __all__ = [
+    "ADAPTIVE_LR_BOUNDS",
     "PPOLocomotionConfig",
     "RunningNormalisation",
+    "adapt_learning_rate",
     "fold_observation_normalisation",
+    "gaussian_kl",
     "make_ppo_actor",
     "train_locomotion_ppo",
 ]
@@ -107,6 +110,7 @@ class PPOLocomotionConfig:
     hidden: int = 256
     init_scale: float = 1.0
     anneal_lr: bool = False
+    desired_kl: float | None = None
     speed_weight: float | None = None
     command_spread: float | None = None
     widen_gate: float | None = None
@@ -130,6 +134,8 @@ class PPOLocomotionConfig:
             )
         if not (self.lr > 0 and self.max_grad_norm > 0 and self.reward_scale > 0 and self.entropy_coeff >= 0 and self.critic_coeff > 0):
             raise ValueError("lr, max_grad_norm, reward_scale and critic_coeff must be > 0 and entropy_coeff >= 0")
+        if self.desired_kl is not None and (not self.desired_kl > 0 or self.anneal_lr):
+            raise ValueError(f"desired_kl must be > 0 and excludes anneal_lr (both set the learning rate), got {self.desired_kl}")
         if not self.init_scale > 0.01:  # the softplus's floor
             raise ValueError(f"init_scale must be > 0.01, got {self.init_scale}")
         if self.speed_weight is not None and not self.speed_weight >= 0:
@@ -151,6 +157,43 @@ class PPOLocomotionConfig:
     @property
     def frames_per_batch(self) -> int:
         return self.num_envs * self.rollout_steps
+
+
+#: The learning rates :func:`adapt_learning_rate` stays within (rsl_rl's).
+ADAPTIVE_LR_BOUNDS = (1e-5, 1e-2)
+
+
+def gaussian_kl(loc: torch.Tensor, scale: torch.Tensor, other_loc: torch.Tensor, other_scale: torch.Tensor) -> torch.Tensor:
+    """``KL(N(loc, scale) || N(other_loc, other_scale))`` of diagonal Gaussians, summed over the last dim.
+
+    Examples:
+        >>> gaussian_kl(torch.zeros(1, 2), torch.ones(1, 2), torch.ones(1, 2), torch.ones(1, 2))
+        tensor([1.])
+    """
+    ratio = scale / other_scale
+    return (0.5 * (ratio.square() + ((loc - other_loc) / other_scale).square() - 1) - ratio.log()).sum(-1)
+
+
+def adapt_learning_rate(lr: float, kl: float, desired_kl: float, factor: float = 1.5) -> float:
+    """The next learning rate of a KL-adaptive PPO (rsl_rl's rule for legged locomotion).
+
+    Divided by ``factor`` when the measured KL exceeds twice ``desired_kl``, multiplied by it
+    when the KL is under half of it, unchanged between; kept within :data:`ADAPTIVE_LR_BOUNDS`.
+
+    Examples:
+        >>> adapt_learning_rate(3e-4, kl=0.05, desired_kl=0.01) == 3e-4 / 1.5
+        True
+        >>> adapt_learning_rate(3e-4, kl=0.001, desired_kl=0.01) == 3e-4 * 1.5
+        True
+        >>> adapt_learning_rate(3e-4, kl=0.01, desired_kl=0.01)
+        0.0003
+    """
+    low, high = ADAPTIVE_LR_BOUNDS
+    if kl > 2 * desired_kl:
+        return max(low, lr / factor)
+    if kl < desired_kl / 2:
+        return min(high, lr * factor)
+    return lr
 
 
 class RunningNormalisation(nn.Module):
@@ -474,7 +517,16 @@ def _update(
                 if key in losses.keys():
                     totals[key] = totals.get(key, 0.0) + losses[key].detach().mean().item()
             count += 1
-    return {key: value / count for key, value in totals.items()}
+    metrics = {key: value / count for key, value in totals.items()}
+    # How far this batch's whole update moved the policy, exactly (the Gaussians' KL, not the
+    # sampled log-ratio, which is noisy and often negative): it sets the next batch's rate.
+    with torch.no_grad():
+        moved = loss.actor_network.get_dist_params(flat.select("observation").clone())
+    metrics["kl_update"] = gaussian_kl(flat["loc"], flat["scale"], moved["loc"], moved["scale"]).mean().item()
+    if config.desired_kl is not None:
+        for group in optimizer.param_groups:
+            group["lr"] = adapt_learning_rate(group["lr"], metrics["kl_update"], config.desired_kl)
+    return {**metrics, "lr": optimizer.param_groups[0]["lr"]}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -493,6 +545,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--entropy-coeff", type=float, default=None, help="PPO's entropy bonus (default 1e-3)")
     parser.add_argument("--init-scale", type=float, default=None, help="exploration noise at initialisation (default 1.0)")
     parser.add_argument("--anneal-lr", action="store_true", help="decay the learning rate linearly to 0 over --steps")
+    parser.add_argument("--desired-kl", type=float, default=None, help="adapt the learning rate to keep PPO's KL near this (e.g. 0.01)")
     parser.add_argument("--speed-weight", type=float, default=None, help="the reward's speed weight (humanoid; default: the env's, 1.0)")
     parser.add_argument(
         "--command-spread", type=float, default=None, help="max angle (rad) between a command and the heading (humanoid; default pi)"
@@ -523,6 +576,7 @@ def main(argv: list[str] | None = None) -> None:
         "entropy_coeff": args.entropy_coeff,
         "init_scale": args.init_scale,
         "anneal_lr": True if args.anneal_lr else None,
+        "desired_kl": args.desired_kl,
         "speed_weight": args.speed_weight,
         "command_spread": args.command_spread,
         "widen_gate": args.widen_gate,
