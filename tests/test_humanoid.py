@@ -266,3 +266,23 @@ def test_maze_expert_without_trained_weights_names_the_command():
 
     with pytest.raises(FileNotFoundError, match="--skill humanoid"):
         HumanoidMazeExpert(HumanoidMazeEnv("medium", batch_size=1, seed=0))
+
+
+def test_a_humanoidmaze_run_with_a_skill_body_of_ones_own_collects_trains_and_evaluates(tmp_path):
+    # Issue 38's Table-1 rows are one command once a body exists: this one has random weights.
+    from torchrl_causal.envs.open_ground import make_skill_network
+    from torchrl_causal.experiment import compose_config
+    from torchrl_causal.lifecycle import run
+
+    torch.manual_seed(0)
+    torch.save(make_skill_network(69, 21).state_dict(), tmp_path / "skill.pt")
+    expert = f"+env.expert={{_target_: torchrl_causal.envs.HumanoidMazeExpert, weights: {tmp_path / 'skill.pt'}}}"
+    overrides = ["env=humanoidmaze_medium", "env.horizon=12", f"run_root={tmp_path}", "progress_bar=false", "threads=1"]
+    overrides += ["demos.episodes=2", "eval.episodes=2", "eval.num_envs=2", "eval.final_episodes=2", "algo=bc", "causal=true"]
+    overrides += ["algo.actor.hidden=16", "algo.actor.num_blocks=1", "algo.epochs=1", "algo.eval_every=1", "algo.batch_size=8"]
+    cfg = compose_config([*overrides, expert])
+    assert cfg.window.k == 2  # the paper's window for HumanoidMaze (Appendix E)
+    result = run(cfg)
+    assert set(result) == {"train", "deploy"} and all(r.n_episodes == 2 for r in result.values())
+    demonstrations = list((tmp_path / "_demos").iterdir())
+    assert len(demonstrations) == 1 and demonstrations[0].name.startswith("humanoidmaze_medium-h12")

@@ -568,9 +568,9 @@ def _check_expert(cfg: DictConfig) -> None:
         raise ConfigValueError(
             f"env {cfg.env.name!r} has no expert (env.expert is null), and every algorithm needs one "
             "(demonstrations, or the expert row). HumanoidMaze's expert (HumanoidMazeExpert) needs its walking "
-            "skill's weights, which this library does not ship yet (`python -m torchrl_causal.envs.locomotion "
-            "--skill humanoid`, ~7-10 CPU-hours); then pass "
-            "env.expert._target_=torchrl_causal.envs.HumanoidMazeExpert, or your own class taking the env."
+            "skill's weights, which this library does not ship yet (issue 38; how they are trained: "
+            "results/humanoid_locomotion/README.md); with a skill body of your own, pass "
+            "'+env.expert={_target_: torchrl_causal.envs.HumanoidMazeExpert, weights: PATH}', or your own class taking the env."
         )
 
 
