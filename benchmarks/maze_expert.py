@@ -11,6 +11,12 @@ steps / -104.0, Large: 55.9% / 648 ± 99 / -255.2; HumanoidMaze Medium: 33.8% / 
         --output results/antmaze_expert.md
     OMP_NUM_THREADS=1 python benchmarks/maze_expert.py --robot humanoid --episodes 500 --radius 0.45 \
         --output results/humanoidmaze_expert.md
+
+``--falls`` (humanoid) instead rolls ``--batch`` episodes to the horizon and prints, per episode,
+the first step with the head below 0.9 m (the skill's fall) and how far the torso got from the
+start, the two things a walking skill must get right before the maze's success rate can move::
+
+    OMP_NUM_THREADS=1 python benchmarks/maze_expert.py --robot humanoid --mazes medium --falls --batch 20 --weights BODY.pt
 """
 
 from __future__ import annotations
@@ -47,6 +53,30 @@ def evaluate(robot: str, maze: str, regime: str, radius: float, episodes: int, b
     return result
 
 
+def falls_and_reach(maze: str, batch: int, seed: int, weights: str | None, fall_height: float = 0.9) -> None:
+    """Prints each humanoid episode's first fall (step, or -) and distance from the start (m) at its end."""
+    env = HumanoidMazeEnv(maze, batch_size=batch, regime="train", seed=seed, success_radius=0.45)
+    expert = HumanoidMazeExpert(env, **({} if weights is None else {"weights": weights}))
+    td = env.reset()
+    start = td["P"].clone()
+    first_fall = torch.full((batch,), -1)
+    with torch.no_grad():
+        rollout = env.rollout(env.horizon, expert, tensordict=td, auto_reset=False, break_when_any_done=False)
+    env.close()
+    fallen = rollout["next", "H"][..., 0] < fall_height
+    first_fall = torch.where(fallen.any(1), fallen.float().argmax(1), first_fall)
+    done = rollout["next", "done"].squeeze(-1)
+    last = torch.where(done.any(1), done.float().argmax(1), torch.full((batch,), done.shape[1] - 1))
+    end = rollout["next", "P"][torch.arange(batch), last]
+    reached = rollout["next", "success"].squeeze(-1).any(1)
+    for index in range(batch):
+        fall = "-" if first_fall[index] < 0 else str(int(first_fall[index]))
+        print(
+            f"episode {index}: success {bool(reached[index])}, first fall {fall}, {float((end[index] - start[index]).norm()):.1f} m from the start"
+        )
+    print(f"{int(reached.sum())} of {batch} reached the goal, {int((first_fall >= 0).sum())} fell")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--robot", choices=sorted(ROBOTS), default="ant")
@@ -58,8 +88,15 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--weights", default=None, help="locomotion state dict (default: the shipped one)")
     parser.add_argument("--output", default=None, help="write the markdown table here too")
+    parser.add_argument("--falls", action="store_true", help="humanoid: per-episode first fall and distance walked instead")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    if args.falls:
+        if args.robot != "humanoid":
+            parser.error("--falls reads the humanoid's head height: use it with --robot humanoid")
+        for maze in args.mazes:
+            falls_and_reach(maze, args.batch, args.seed, args.weights)
+        return
 
     lines = [
         "| maze | radius (m) | regime | episodes | success % (± SE) | mean successful length (± std) | raw E[Y] (± std) "
