@@ -71,9 +71,8 @@ def falls_and_reach(maze: str, batch: int, seed: int, weights: str | None, fall_
     reached = rollout["next", "success"].squeeze(-1).any(1)
     for index in range(batch):
         fall = "-" if first_fall[index] < 0 else str(int(first_fall[index]))
-        print(
-            f"episode {index}: success {bool(reached[index])}, first fall {fall}, {float((end[index] - start[index]).norm()):.1f} m from the start"
-        )
+        walked = float((end[index] - start[index]).norm())
+        print(f"episode {index}: success {bool(reached[index])}, first fall {fall}, {walked:.1f} m from the start")
     print(f"{int(reached.sum())} of {batch} reached the goal, {int((first_fall >= 0).sum())} fell")
 
 
