@@ -192,6 +192,10 @@ def test_a_run_started_from_another_runs_learner_continues_its_steps_under_its_o
         train_locomotion_ppo(tmp_path / "x", _config(FRAMES), resume_from=parent_file, init_from=parent_file)
     with pytest.raises(ValueError, match="does not fit this config"):
         train_locomotion_ppo(tmp_path / "y", _config(3 * FRAMES, hidden=8), init_from=parent_file, progress_bar=False)
+    # init_scale biases the noise's softplus: the same weights under another one are another policy.
+    with pytest.raises(ValueError, match=r"init_scale=1.0, which sets the policy's noise mapping: pass the same \(--init-scale 1.0\)"):
+        train_locomotion_ppo(tmp_path / "w", _config(3 * FRAMES, init_scale=0.3), init_from=parent_file, progress_bar=False)
+    assert not (tmp_path / "w" / "ppo_config.json").exists()
 
 
 def test_reward_options_the_skills_env_lacks_are_refused(tmp_path) -> None:

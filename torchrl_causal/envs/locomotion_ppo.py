@@ -373,6 +373,13 @@ def train_locomotion_ppo(
         log.info("[%s ppo] resumed at %d env steps from %s", skill.name, counters["steps"], source)
     elif init_from is not None:
         parent = _load_ppo_state(Path(init_from), skill)
+        parent_scale = parent["config"].get("init_scale", PPOLocomotionConfig.init_scale)
+        if parent_scale != config.init_scale:
+            # The scale's softplus bias is set by init_scale: another value changes the parent's policy.
+            raise ValueError(
+                f"{init_from} was trained with init_scale={parent_scale}, which sets the policy's noise mapping: "
+                f"pass the same (--init-scale {parent_scale}), got {config.init_scale}"
+            )
         try:
             loss.load_state_dict(parent["loss"])
             optimizer.load_state_dict(parent["optimizer"])
