@@ -59,12 +59,11 @@ def falls_and_reach(maze: str, batch: int, seed: int, weights: str | None, fall_
     expert = HumanoidMazeExpert(env, **({} if weights is None else {"weights": weights}))
     td = env.reset()
     start = td["P"].clone()
-    first_fall = torch.full((batch,), -1)
     with torch.no_grad():
         rollout = env.rollout(env.horizon, expert, tensordict=td, auto_reset=False, break_when_any_done=False)
     env.close()
     fallen = rollout["next", "H"][..., 0] < fall_height
-    first_fall = torch.where(fallen.any(1), fallen.float().argmax(1), first_fall)
+    first_fall = torch.where(fallen.any(1), fallen.float().argmax(1), -1)
     done = rollout["next", "done"].squeeze(-1)
     last = torch.where(done.any(1), done.float().argmax(1), torch.full((batch,), done.shape[1] - 1))
     end = rollout["next", "P"][torch.arange(batch), last]
