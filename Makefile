@@ -23,7 +23,7 @@ demo: $(STAMP)
 	$(PY) -m torchrl_causal.demo
 
 test: $(STAMP)
-	OMP_NUM_THREADS=1 $(PY) -m pytest
+	OMP_NUM_THREADS=1 $(PY) -m pytest -n auto --dist loadfile
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache
