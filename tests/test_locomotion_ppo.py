@@ -224,6 +224,8 @@ def test_the_command_line_sets_the_config_it_names(tmp_path, monkeypatch) -> Non
     config = seen["config"]
     assert (config.gamma, config.speed_weight, config.command_spread, config.total_steps) == (0.995, 2.5, 0.5, 640)
     assert config.lmbda == PPOLocomotionConfig().lmbda and seen["init_from"] == "parent.pt"
+    locomotion_ppo.main(argv)  # no --output: the export stays in the run directory, never the package's weights
+    assert seen["output"] == tmp_path / "export.pt" and seen["output"] != SKILLS["humanoid"].weights
     with pytest.raises(ValueError, match="need 0 < gamma < 1"):
         locomotion_ppo.main(["--run-dir", str(tmp_path), "--gamma", "1.0"])
 

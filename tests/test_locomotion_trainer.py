@@ -50,7 +50,7 @@ def test_resume_from_the_small_state_refills_the_buffer_then_updates(tmp_path):
 
 
 def test_resume_refuses_another_config_or_skill(tmp_path):
-    # output=None: nothing is exported (the default would overwrite the weights shipped in the package)
+    # output=None (the default, spelled out): nothing is exported
     train_locomotion(tmp_path / "a", _config(FRAMES), skill="humanoid", output=None)
     state_file = tmp_path / "a" / "resume_state.pt"
     with pytest.raises(ValueError, match="updates_per_step"):
@@ -60,3 +60,14 @@ def test_resume_refuses_another_config_or_skill(tmp_path):
     with pytest.raises(FileNotFoundError, match="no checkpoint at .*none.pt"):  # missing, not "corrupted"
         train_locomotion(tmp_path / "d", _config(2 * FRAMES), skill="humanoid", output=None, resume_from=tmp_path / "none.pt")
     assert not any(tmp_path.rglob("*locomotion.pt")) and not SKILLS["humanoid"].weights.exists()
+
+
+def test_the_command_line_exports_into_its_run_directory_unless_told_otherwise(tmp_path, monkeypatch):
+    from torchrl_causal.envs import locomotion
+
+    seen = {}
+    monkeypatch.setattr(locomotion, "train_locomotion", lambda run_dir, config, **kw: seen.update(run_dir=run_dir, **kw) or {})
+    locomotion.main(["--skill", "ant", "--run-dir", str(tmp_path / "run"), "--steps", "400"])
+    assert seen["output"] == tmp_path / "run" / "export.pt"  # a trial run never replaces the shipped weights
+    locomotion.main(["--skill", "ant", "--run-dir", str(tmp_path / "run"), "--output", str(tmp_path / "ship.pt")])
+    assert seen["output"] == str(tmp_path / "ship.pt")

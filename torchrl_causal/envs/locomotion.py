@@ -21,10 +21,12 @@ Runs resume in two ways:
   ``--resume-from FILE`` starts a fresh run directory from such a file; the buffer refills from
   the current policy (no random actions) before the updates go on.
 
-The best evaluation's policy body is exported to ``--output`` (by default the weights shipped
-in the package for that skill)::
+The best evaluation's policy body is exported to ``--output`` (by default ``<run_dir>/export.pt``:
+a run never overwrites the weights the package ships unless that path is named, as here, where
+the ant's shipped weights are regenerated)::
 
-    python -m torchrl_causal.envs.locomotion --skill ant --run-dir runs/ant_locomotion
+    python -m torchrl_causal.envs.locomotion --skill ant --run-dir runs/ant_locomotion \
+        --output torchrl_causal/envs/assets/ant_locomotion.pt
     python -m torchrl_causal.envs.locomotion --skill humanoid --run-dir runs/humanoid_locomotion
 """
 
@@ -64,6 +66,7 @@ __all__ = [
     "BEST_BODY",
     "BOOKKEEPING",
     "SKILLS",
+    "EXPORT",
     "SKILL_WEIGHTS",
     "LocomotionConfig",
     "LocomotionSkill",
@@ -321,8 +324,11 @@ def finish_skill_run(run_dir: Path, output: str | Path | None, record: dict[str,
     return record
 
 
-#: ``train_locomotion``'s default ``output``: the weights the package ships for the skill.
+#: ``train_locomotion``'s ``output`` for the weights the package ships for the skill.
 SKILL_WEIGHTS = Path("<the skill's shipped weights>")
+#: The command lines' default export, in the run directory: only a named ``--output`` replaces
+#: the package's weights (a short trial run must not).
+EXPORT = "export.pt"
 
 
 def train_locomotion(
@@ -330,13 +336,13 @@ def train_locomotion(
     config: LocomotionConfig = LocomotionConfig(),
     *,
     skill: str | LocomotionSkill = "ant",
-    output: str | Path | None = SKILL_WEIGHTS,
+    output: str | Path | None = None,
     resume_from: str | Path | None = None,
 ) -> dict[str, Any]:
     """Trains (or resumes) a skill's policy in ``run_dir``; exports the best body to ``output``.
 
-    ``output`` defaults to the weights shipped for the skill (``skill.weights``); ``None``
-    exports nothing. ``resume_from``
+    ``output=None`` (the default) exports nothing beyond the run directory's best body;
+    :data:`SKILL_WEIGHTS` names the weights shipped for the skill (``skill.weights``). ``resume_from``
     (a ``resume_state.pt``) starts an empty ``run_dir`` from another machine's run: its
     networks, optimisers and counters, the buffer refilled by the current policy; a
     ``run_dir`` that has its own checkpoint ignores it. Returns the final record: steps,
@@ -496,7 +502,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--eval-every", type=int, default=None, help="env steps between evaluations (and checkpoints)")
     parser.add_argument("--seed", type=int, default=None)
     parser.add_argument(
-        "--output", default=None, help="where the best policy body is exported (default: the skill's weights in the package)"
+        "--output",
+        default=None,
+        help="where the best policy body is exported (default: <run-dir>/export.pt; the package's weights only when named)",
     )
     parser.add_argument("--threads", type=int, default=1, help="torch threads (one is fastest on small CPUs)")
     args = parser.parse_args(argv)
@@ -505,11 +513,12 @@ def main(argv: list[str] | None = None) -> None:
     config = skill.config(
         total_steps=args.steps, updates_per_step=args.utd, random_steps=args.random_steps, eval_every=args.eval_every, seed=args.seed
     )
+    run_dir = Path(args.run_dir or f"runs/{skill.name}_locomotion")
     record = train_locomotion(
-        args.run_dir or f"runs/{skill.name}_locomotion",
+        run_dir,
         config,
         skill=skill,
-        output=args.output or SKILL_WEIGHTS,
+        output=args.output or run_dir / EXPORT,
         resume_from=args.resume_from,
     )
     print(json.dumps(record))

@@ -48,6 +48,7 @@ from torchrl.record.loggers.csv import CSVLogger
 
 from torchrl_causal.envs.locomotion import (
     BEST_BODY,
+    EXPORT,
     SKILLS,
     LocomotionSkill,
     check_same_config,
@@ -564,7 +565,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--eval-envs", type=int, default=None, help="simulations per evaluation (default 8)")
     parser.add_argument("--init-from", default=None, help="a PPO resume_state.pt whose learner starts this new run (a curriculum stage)")
     parser.add_argument(
-        "--output", default=None, help="where the best folded policy body is exported (default: the skill's weights in the package)"
+        "--output",
+        default=None,
+        help="where the best folded policy body is exported (default: <run-dir>/export.pt; the package's weights only when named)",
     )
     parser.add_argument("--threads", type=int, default=1, help="torch threads (one is fastest on small CPUs)")
     args = parser.parse_args(argv)
@@ -591,11 +594,12 @@ def main(argv: list[str] | None = None) -> None:
         "eval_envs": args.eval_envs,
     }
     config = replace(PPOLocomotionConfig(), **{k: v for k, v in overrides.items() if v is not None})
+    run_dir = Path(args.run_dir or f"runs/{skill.name}_ppo")
     record = train_locomotion_ppo(
-        args.run_dir or f"runs/{skill.name}_ppo",
+        run_dir,
         config,
         skill=skill,
-        output=args.output or skill.weights,
+        output=args.output or run_dir / EXPORT,
         resume_from=args.resume_from,
         init_from=args.init_from,
     )
