@@ -225,6 +225,8 @@ def test_the_command_line_sets_the_config_it_names(tmp_path, monkeypatch) -> Non
     assert (config.gamma, config.speed_weight, config.command_spread, config.total_steps) == (0.995, 2.5, 0.5, 640)
     assert config.lmbda == PPOLocomotionConfig().lmbda and seen["init_from"] == "parent.pt"
     locomotion_ppo.main(argv)  # no --output: the export stays in the run directory, never the package's weights
+    locomotion_ppo.main([*argv, "--command-spread", "pi"])  # uniform commands, exactly (3.1416 would be refused)
+    assert seen["config"].command_spread == math.pi
     assert seen["output"] == tmp_path / "export.pt" and seen["output"] != SKILLS["humanoid"].weights
     with pytest.raises(ValueError, match="need 0 < gamma < 1"):
         locomotion_ppo.main(["--run-dir", str(tmp_path), "--gamma", "1.0"])

@@ -142,7 +142,7 @@ class PPOLocomotionConfig:
         if self.speed_weight is not None and not self.speed_weight >= 0:
             raise ValueError(f"speed_weight must be >= 0, got {self.speed_weight}")
         if self.command_spread is not None and not 0 <= self.command_spread <= math.pi:
-            raise ValueError(f"command_spread must lie in [0, pi], got {self.command_spread}")
+            raise ValueError(f"command_spread must lie in [0, pi], got {self.command_spread} (--command-spread pi: uniform)")
         if self.widen_gate is not None:
             if self.command_spread is None or self.command_spread >= math.pi:
                 raise ValueError(f"widen_gate needs a command_spread below pi to widen from, got {self.command_spread}")
@@ -537,6 +537,11 @@ def _update(
     return {**metrics, "lr": optimizer.param_groups[0]["lr"]}
 
 
+def _angle(text: str) -> float:
+    """An angle in radians from the command line; ``pi`` spells the uniform spread exactly (3.1416 exceeds it)."""
+    return math.pi if text.strip().lower() == "pi" else float(text)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--skill", choices=sorted(SKILLS), default="humanoid")
@@ -556,7 +561,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--desired-kl", type=float, default=None, help="adapt the learning rate to keep PPO's KL near this (e.g. 0.01)")
     parser.add_argument("--speed-weight", type=float, default=None, help="the reward's speed weight (humanoid; default: the env's, 1.0)")
     parser.add_argument(
-        "--command-spread", type=float, default=None, help="max angle (rad) between a command and the heading (humanoid; default pi)"
+        "--command-spread",
+        type=_angle,
+        default=None,
+        help="max angle (rad, or 'pi' for uniform commands) between a command and the heading (humanoid; default pi)",
     )
     parser.add_argument(
         "--widen-gate", type=float, default=None, help="upright speed (m/s) at an evaluation that widens the commands (a curriculum)"
