@@ -67,12 +67,12 @@ __all__ = [
     "BOOKKEEPING",
     "SKILLS",
     "EXPORT",
-    "SKILL_WEIGHTS",
     "LocomotionConfig",
     "LocomotionSkill",
     "evaluate_locomotion",
     "make_locomotion_actor",
     "check_same_config",
+    "add_output_argument",
     "finish_skill_run",
     "require_positive",
     "train_locomotion",
@@ -324,11 +324,18 @@ def finish_skill_run(run_dir: Path, output: str | Path | None, record: dict[str,
     return record
 
 
-#: ``train_locomotion``'s ``output`` for the weights the package ships for the skill.
-SKILL_WEIGHTS = Path("<the skill's shipped weights>")
 #: The command lines' default export, in the run directory: only a named ``--output`` replaces
 #: the package's weights (a short trial run must not).
 EXPORT = "export.pt"
+
+
+def add_output_argument(parser: argparse.ArgumentParser) -> None:
+    """The skill command lines' ``--output``: unset, they export to ``<run-dir>/``:data:`EXPORT`."""
+    parser.add_argument(
+        "--output",
+        default=None,
+        help="where the best policy body is exported (default: <run-dir>/export.pt; the package's weights only when named)",
+    )
 
 
 def train_locomotion(
@@ -342,7 +349,7 @@ def train_locomotion(
     """Trains (or resumes) a skill's policy in ``run_dir``; exports the best body to ``output``.
 
     ``output=None`` (the default) exports nothing beyond the run directory's best body;
-    :data:`SKILL_WEIGHTS` names the weights shipped for the skill (``skill.weights``). ``resume_from``
+    ``skill.weights`` replaces the weights the package ships for the skill. ``resume_from``
     (a ``resume_state.pt``) starts an empty ``run_dir`` from another machine's run: its
     networks, optimisers and counters, the buffer refilled by the current policy; a
     ``run_dir`` that has its own checkpoint ignores it. Returns the final record: steps,
@@ -350,7 +357,6 @@ def train_locomotion(
     is refused (the changed fields are named).
     """
     skill = SKILLS[skill] if isinstance(skill, str) else skill
-    output = skill.weights if output == SKILL_WEIGHTS else output
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     config_path = run_dir / _CONFIG
@@ -501,11 +507,7 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--eval-every", type=int, default=None, help="env steps between evaluations (and checkpoints)")
     parser.add_argument("--seed", type=int, default=None)
-    parser.add_argument(
-        "--output",
-        default=None,
-        help="where the best policy body is exported (default: <run-dir>/export.pt; the package's weights only when named)",
-    )
+    add_output_argument(parser)
     parser.add_argument("--threads", type=int, default=1, help="torch threads (one is fastest on small CPUs)")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)

@@ -51,6 +51,7 @@ from torchrl_causal.envs.locomotion import (
     EXPORT,
     SKILLS,
     LocomotionSkill,
+    add_output_argument,
     check_same_config,
     evaluate_locomotion,
     finish_skill_run,
@@ -572,11 +573,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--widen-step", type=float, default=None, help="radians the commands widen by at the gate (default pi/4)")
     parser.add_argument("--eval-envs", type=int, default=None, help="simulations per evaluation (default 8)")
     parser.add_argument("--init-from", default=None, help="a PPO resume_state.pt whose learner starts this new run (a curriculum stage)")
-    parser.add_argument(
-        "--output",
-        default=None,
-        help="where the best folded policy body is exported (default: <run-dir>/export.pt; the package's weights only when named)",
-    )
+    add_output_argument(parser)
     parser.add_argument("--threads", type=int, default=1, help="torch threads (one is fastest on small CPUs)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
