@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -51,8 +50,8 @@ def main(argv: list[str] | None = None) -> None:
         parser.error(f"--envs and --steps must be positive, got {args.envs} and {args.steps}")
     torch.set_num_threads(1)
 
-    print(f"| body | {' | '.join(SPREADS)} | uniform speed / first body's |")
-    print(f"|---|{'---|' * len(SPREADS)}---|")
+    print(f"| body | {' | '.join(SPREADS)} | uniform speed / first body's | wall time |")
+    print(f"|---|{'---|' * len(SPREADS)}---|---|")
     first_uniform: float | None = None
     for path in args.weights:
         body = load_body(path, args.hidden)
@@ -70,8 +69,7 @@ def main(argv: list[str] | None = None) -> None:
             uniform = result["speed"]
         first_uniform = uniform if first_uniform is None else first_uniform
         ratio = uniform / first_uniform if first_uniform > 0 else float("nan")
-        print(f"| {path} | {' | '.join(cells)} | {ratio:.2f} |", flush=True)
-        print(f"({path}: {time.perf_counter() - start:.0f} s)", file=sys.stderr)
+        print(f"| {path} | {' | '.join(cells)} | {ratio:.2f} | {time.perf_counter() - start:.0f} s |", flush=True)
 
 
 if __name__ == "__main__":
