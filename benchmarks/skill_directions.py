@@ -23,16 +23,10 @@ from pathlib import Path
 
 import torch
 
-from torchrl_causal.envs.locomotion import SKILLS, evaluate_locomotion
+from torchrl_causal.envs.humanoid import load_humanoid_locomotion_network
+from torchrl_causal.envs.locomotion import evaluate_locomotion
 
 SPREADS: dict[str, float] = {"straight ahead": 0.0, "within pi/4": math.pi / 4, "within pi/2": math.pi / 2, "uniform": math.pi}
-
-
-def load_body(path: Path, hidden: int) -> torch.nn.Module:
-    """A humanoid skill body from a ``best_body.pt`` / exported state dict (weights only)."""
-    body = SKILLS["humanoid"].network(hidden)
-    body.load_state_dict(torch.load(path, weights_only=True))
-    return body
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -40,7 +34,6 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--weights", type=Path, nargs="+", required=True, help="skill bodies (state dicts) to compare")
     parser.add_argument("--envs", type=int, default=32, help="simulations per spread")
     parser.add_argument("--steps", type=int, default=400, help="control steps per simulation (40 Hz)")
-    parser.add_argument("--hidden", type=int, default=256, help="the bodies' hidden width")
     parser.add_argument("--speed-weight", type=float, default=2.5, help="the env's reward setting (does not change the rollout)")
     args = parser.parse_args(argv)
     missing = [str(path) for path in args.weights if not path.is_file()]
@@ -54,7 +47,7 @@ def main(argv: list[str] | None = None) -> None:
     print(f"|---|{'---|' * len(SPREADS)}---|---|")
     first_uniform: float | None = None
     for path in args.weights:
-        body = load_body(path, args.hidden)
+        body = load_humanoid_locomotion_network(path)  # a command-frame body comes with its frame
         start = time.perf_counter()
         cells, uniform = [], 0.0
         for spread in SPREADS.values():

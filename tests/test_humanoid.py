@@ -10,6 +10,7 @@ a few metres alone drifts a random-action trajectory apart by 1e-3 within 200 st
 
 from __future__ import annotations
 
+import math
 import mujoco
 import numpy as np
 import ogbench
@@ -236,12 +237,13 @@ def test_a_command_spread_outside_zero_to_pi_is_refused():
 # -- the maze expert's wiring (no trained skill ships yet) -------------------------------------
 
 
-def test_maze_expert_steers_the_skill_towards_the_planner_waypoint_and_never_reads_w(tmp_path):
+@pytest.mark.parametrize("command_frame", [False, True])
+def test_maze_expert_steers_the_skill_towards_the_planner_waypoint_and_never_reads_w(tmp_path, command_frame):
     from torchrl_causal.envs import HumanoidMazeExpert, MazePlanner
-    from torchrl_causal.envs.open_ground import make_skill_network
+    from torchrl_causal.envs.humanoid import humanoid_skill_network
 
     torch.manual_seed(0)
-    skill = make_skill_network(69, 21)
+    skill = humanoid_skill_network(command_frame=command_frame)  # the loader rebuilds the frame from the weights' keys
     torch.save(skill.state_dict(), tmp_path / "skill.pt")
     env = HumanoidMazeEnv("medium", batch_size=3, seed=4)
     expert = HumanoidMazeExpert(env, weights=tmp_path / "skill.pt")
@@ -286,3 +288,54 @@ def test_a_humanoidmaze_run_with_a_skill_body_of_ones_own_collects_trains_and_ev
     assert set(result) == {"train", "deploy"} and all(r.n_episodes == 2 for r in result.values())
     demonstrations = list((tmp_path / "_demos").iterdir())
     assert len(demonstrations) == 1 and demonstrations[0].name.startswith("humanoidmaze_medium-h12")
+
+
+# -- the command frame: the skill's observation after turning the world about the vertical -----
+
+
+@pytest.mark.parametrize("yaw", [0.7, -2.0, math.pi])
+def test_turning_the_world_turns_only_the_command_frame_vectors_and_the_frame_undoes_it(yaw):
+    from torchrl_causal.envs.humanoid import (
+        COMMAND_FRAME_VECTORS,
+        HUMANOID_COLUMNS,
+        HUMANOID_SKILL_VARIABLES,
+        HUMANOID_STATE_WIDTH,
+        HUMANOID_XML,
+        CommandFrame,
+        HumanoidReadout,
+        standing_qpos,
+    )
+
+    model = mujoco.MjModel.from_xml_path(str(HUMANOID_XML))
+    readout = HumanoidReadout(model)
+    rng = np.random.default_rng(0)
+    data = mujoco.MjData(model)
+    data.qpos[:] = standing_qpos(model, np.array([0.3]))[0] + 0.05 * rng.uniform(-1, 1, model.nq)
+    data.qvel[:] = rng.normal(size=model.nv)
+    mujoco.mj_step(model, data, 3)  # a moving, tumbling state
+    # The same state in a world turned by yaw: position and the free joint's (world-frame) linear
+    # velocity turn, the orientation is pre-multiplied, the local angular velocity and hinges stay.
+    turn = np.array([[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]])
+    turned = mujoco.MjData(model)
+    turned.qpos[:], turned.qvel[:] = data.qpos, data.qvel
+    turned.qpos[:2], turned.qvel[:2] = turn @ data.qpos[:2], turn @ data.qvel[:2]
+    mujoco.mju_mulQuat(turned.qpos[3:7], np.array([math.cos(yaw / 2), 0, 0, math.sin(yaw / 2)]), data.qpos[3:7])
+
+    def observation(state: mujoco.MjData, command: np.ndarray) -> torch.Tensor:
+        row = np.zeros(HUMANOID_STATE_WIDTH)
+        readout.read(state, row)
+        return torch.from_numpy(np.concatenate([row[HUMANOID_COLUMNS[v]] for v in HUMANOID_SKILL_VARIABLES] + [command]))
+
+    command = np.array([math.cos(1.1), math.sin(1.1)])
+    before, after = observation(data, command), observation(turned, turn @ command)
+    moved = [i + k for i in COMMAND_FRAME_VECTORS for k in (0, 1)]
+    kept = [i for i in range(len(before)) if i not in moved]
+    torch.testing.assert_close(after[kept], before[kept], rtol=0, atol=1e-8)  # everything else is yaw-free
+    for i in COMMAND_FRAME_VECTORS:
+        torch.testing.assert_close(after[i : i + 2], torch.from_numpy(turn) @ before[i : i + 2], rtol=0, atol=1e-8)
+    frame = CommandFrame().double()
+    torch.testing.assert_close(frame(after), frame(before), rtol=0, atol=1e-8)
+    assert frame(before)[-2:].tolist() == [1.0, 0.0]
+    com = COMMAND_FRAME_VECTORS[0]
+    along = float(before[com : com + 2] @ torch.from_numpy(command))
+    assert abs(float(frame(before)[com]) - along) < 1e-12  # C's first component is its speed along the command

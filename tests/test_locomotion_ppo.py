@@ -268,3 +268,30 @@ def test_the_commands_widen_at_each_evaluation_that_reaches_the_gate(tmp_path, m
 def test_a_curriculum_without_room_to_widen_is_refused_in_one_line(change, message) -> None:
     with pytest.raises(ValueError, match=message):
         _config(FRAMES, **change)
+
+
+def test_a_command_frame_run_learns_on_turned_observations_and_exports_a_body_for_the_envs_own(tmp_path) -> None:
+    from torchrl_causal.envs.humanoid import COMMAND_FRAME_VECTORS, CommandFrame, load_humanoid_locomotion_network
+
+    plain = train_locomotion_ppo(tmp_path / "world", _config(FRAMES, hidden=256), progress_bar=False)
+    assert "exported" not in plain
+    # A world-frame learner starts a command-frame run: the frame is no part of the learner's state.
+    train_locomotion_ppo(
+        tmp_path / "turned",
+        _config(3 * FRAMES, hidden=256, command_frame=True),
+        init_from=tmp_path / "world" / "resume_state.pt",
+        output=tmp_path / "turned.pt",
+        progress_bar=False,
+    )
+    state = torch.load(tmp_path / "turned" / "resume_state.pt", weights_only=True)
+    assert not any("command_frame" in key for key in state["loss"])
+    body = load_humanoid_locomotion_network(tmp_path / "turned.pt")
+    assert isinstance(body[0], CommandFrame)
+    observation = torch.randn(4, SKILLS["humanoid"].observation_dim)
+    observation[:, -2:] = torch.nn.functional.normalize(observation[:, -2:], dim=-1)
+    turned = observation.clone()  # the world turned by 180 degrees: the exported body acts the same
+    for i in COMMAND_FRAME_VECTORS:
+        turned[:, i : i + 2] = -observation[:, i : i + 2]
+    torch.testing.assert_close(body(turned), body(observation), rtol=1e-5, atol=1e-5)
+    with pytest.raises(ValueError, match="the ant skill has no command frame"):
+        train_locomotion_ppo(tmp_path / "ant", _config(FRAMES, command_frame=True), skill="ant", progress_bar=False)

@@ -31,6 +31,8 @@ from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv, load_skill
 from torchrl_causal.envs.mujoco_maze import BatchedSimulation
 
 __all__ = [
+    "COMMAND_FRAME_VECTORS",
+    "CommandFrame",
     "HUMANOID_COLUMNS",
     "HUMANOID_LOCOMOTION_WEIGHTS",
     "HUMANOID_SKILL_OBSERVATION_DIM",
@@ -38,6 +40,7 @@ __all__ = [
     "HumanoidLocomotionEnv",
     "START_QPOS_NOISE",
     "START_QVEL_NOISE",
+    "humanoid_skill_network",
     "load_humanoid_locomotion_network",
     "stand_reward",
     "HUMANOID_EXTREMITIES",
@@ -151,27 +154,95 @@ def standing_qpos(model: mujoco.MjModel, yaw: np.ndarray, *, clearance: float = 
 HUMANOID_SKILL_VARIABLES = ("A", "H", "E", "V", "C", "J")
 #: The skill's observation: those 67 dims and the commanded unit direction (2).
 HUMANOID_SKILL_OBSERVATION_DIM = 67 + 2
+_SKILL_COLUMNS = np.concatenate([np.arange(HUMANOID_STATE_WIDTH)[HUMANOID_COLUMNS[v]] for v in HUMANOID_SKILL_VARIABLES])
+_COMMAND = HUMANOID_SKILL_OBSERVATION_DIM - 2
+#: Where the skill observation's world-frame ground-plane vectors start: C's x, y (the
+#: centre-of-mass velocity), ``qvel``'s first two (the root's linear velocity, world frame for a
+#: free joint) and the command; the rest of the observation is egocentric or yaw-free.
+COMMAND_FRAME_VECTORS = (int(np.flatnonzero(_SKILL_COLUMNS == _COM)[0]), int(np.flatnonzero(_SKILL_COLUMNS == _NQ)[0]), _COMMAND)
 #: Where the package ships the trained skill's policy body (none yet: issue 38's long run makes it).
 HUMANOID_LOCOMOTION_WEIGHTS = pathlib.Path(__file__).parent / "assets" / "humanoid_locomotion.pt"
 
 
+class CommandFrame(torch.nn.Module):
+    """Turns a skill observation's ground-plane vectors into the command's frame: a yaw-free input.
+
+    The skill's observation is OGBench's: egocentric except three world-frame ground-plane
+    vectors, the centre-of-mass velocity (C's x, y), the root's linear velocity (the first two
+    of ``qvel``, J) and the command. Open ground, the standing start (uniform yaw) and the
+    tremors are all symmetric under a turn of the world about the vertical, so the best
+    response to an observation is the same after turning those three vectors together; this
+    module picks the turn that points the command along +x (the output's command slots are then
+    always ``(1, 0)``). Its output is a function of the observation alone, so the skill still
+    reads only the expert's variables (no yaw, which the observation lacks); what it spares the
+    policy is learning the same steering once per world direction (the world-frame KL stage's
+    body, fed this frame, walks at a third of its speed: it had not learnt the symmetry).
+
+    Its persistent ``command_frame`` buffer marks an exported body that starts with it
+    (:func:`load_humanoid_locomotion_network` rebuilds the same network from the keys).
+
+    Examples:
+        >>> frame = CommandFrame()
+        >>> observation = torch.randn(3, HUMANOID_SKILL_OBSERVATION_DIM)
+        >>> observation[:, -2:] = torch.nn.functional.normalize(observation[:, -2:], dim=-1)
+        >>> turned = observation.clone()  # the same situation with the world turned by 90 degrees
+        >>> for i in COMMAND_FRAME_VECTORS:
+        ...     turned[:, i], turned[:, i + 1] = -observation[:, i + 1], observation[:, i]
+        >>> torch.allclose(frame(observation), frame(turned), atol=1e-6), frame(observation)[0, -2:].tolist()
+        (True, [1.0, 0.0])
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.register_buffer("command_frame", torch.ones(()))
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        command = observation[..., _COMMAND : _COMMAND + 2]
+        cos, sin = command[..., :1], command[..., 1:]
+        out = observation.clone()
+        for i in COMMAND_FRAME_VECTORS[:-1]:
+            x, y = observation[..., i : i + 1], observation[..., i + 1 : i + 2]
+            out[..., i : i + 2] = torch.cat((cos * x + sin * y, cos * y - sin * x), dim=-1)  # R(-angle of command)
+        out[..., _COMMAND] = 1.0
+        out[..., _COMMAND + 1] = 0.0
+        return out
+
+
+def humanoid_skill_network(hidden: int = 256, *, command_frame: bool = False) -> torch.nn.Sequential:
+    """The humanoid skill's policy body (69 -> 2 x 21), behind a :class:`CommandFrame` if ``command_frame``.
+
+    Examples:
+        >>> list(humanoid_skill_network(8, command_frame=True).state_dict())[:2]
+        ['0.command_frame', '1.weight']
+    """
+    body = make_skill_network(HUMANOID_SKILL_OBSERVATION_DIM, 21, hidden)
+    return torch.nn.Sequential(CommandFrame(), *body) if command_frame else body
+
+
+def _stored_command_frame(path: pathlib.Path) -> bool:
+    """Whether the weights at ``path`` start with a :class:`CommandFrame` (``False`` when unreadable: the load says why)."""
+    try:
+        return "0.command_frame" in torch.load(path, map_location="cpu", weights_only=True)
+    except Exception:  # a missing or corrupt file: load_skill_network's error names it
+        return False
+
+
 def load_humanoid_locomotion_network(path: str | pathlib.Path = HUMANOID_LOCOMOTION_WEIGHTS) -> torch.nn.Module:
-    """The humanoid skill's 2 x 256 policy body (69 -> 2 x 21) with trained weights, in eval mode.
+    """The humanoid skill's 2 x 256 policy body (69 -> 2 x 21) with trained weights, in eval mode
+    (behind a :class:`CommandFrame` when the weights were trained with one).
 
     Raises:
         FileNotFoundError: naming the command that makes the weights.
     """
+    path = pathlib.Path(path)
     return load_skill_network(
         path,
-        make_skill_network(HUMANOID_SKILL_OBSERVATION_DIM, 21),
+        humanoid_skill_network(command_frame=_stored_command_frame(path)),
         regenerate=(
             "python -m torchrl_causal.envs.locomotion_ppo --skill humanoid, in curriculum stages (standing, walking "
             "straight, steering; tens of millions of env steps over several sittings): results/humanoid_locomotion/README.md"
         ),
     )
-
-
-_SKILL_COLUMNS = np.concatenate([np.arange(HUMANOID_STATE_WIDTH)[HUMANOID_COLUMNS[v]] for v in HUMANOID_SKILL_VARIABLES])
 
 
 class HumanoidLocomotionEnv(DirectionalLocomotionEnv):

@@ -57,6 +57,7 @@ from torchrl_causal.envs.ant import LOCOMOTION_OBSERVATION_DIM, LOCOMOTION_WEIGH
 from torchrl_causal.envs.humanoid import (
     HUMANOID_LOCOMOTION_WEIGHTS,
     HUMANOID_SKILL_OBSERVATION_DIM,
+    CommandFrame,
     HumanoidLocomotionEnv,
 )
 from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv, make_skill_network
@@ -134,6 +135,9 @@ class LocomotionSkill:
         weights: where the package ships the skill's policy body (the default export).
         defaults: the :class:`LocomotionConfig` fields this skill changes.
         env_options: the names ``make_env`` accepts as ``options``.
+        command_frame: makes the module that turns this skill's observations into the command's
+            frame (:class:`~torchrl_causal.envs.humanoid.CommandFrame`), or ``None`` where the
+            skill has none (the PPO trainer's ``command_frame`` option).
     """
 
     name: str
@@ -143,6 +147,7 @@ class LocomotionSkill:
     weights: Path
     defaults: dict[str, Any] = field(default_factory=dict)
     env_options: tuple[str, ...] = ()
+    command_frame: Callable[[], nn.Module] | None = None
 
     def config(self, **overrides: Any) -> LocomotionConfig:
         """The skill's default :class:`LocomotionConfig` with ``overrides`` (``None`` values ignored)."""
@@ -173,6 +178,7 @@ SKILLS: dict[str, LocomotionSkill] = {
             "eval_steps": 400,
         },
         env_options=("speed_weight", "command_spread"),
+        command_frame=CommandFrame,
     ),
 }
 

@@ -41,6 +41,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictSequential
 from torch import nn
 from torchrl.collectors import Collector
+from torchrl.envs import TransformedEnv, UnaryTransform
 from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOperator
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
@@ -94,6 +95,9 @@ class PPOLocomotionConfig:
     reaches the gate, the spread widens by ``widen_step`` for the rest of the run, up to pi (uniform,
     the skill's task). Each spread selects its own best body (a wider one is a harder task, so
     scores across spreads do not compare): the export is the best at the widest spread reached.
+    ``command_frame`` makes the learner read observations turned into the command's frame (the
+    skill's :class:`~torchrl_causal.envs.humanoid.CommandFrame`, applied to the collector's env;
+    the exported body starts with it, so it reads the env's own observations).
     """
 
     total_steps: int = 30_000_000
@@ -117,6 +121,7 @@ class PPOLocomotionConfig:
     command_spread: float | None = None
     widen_gate: float | None = None
     widen_step: float = math.pi / 4
+    command_frame: bool = False
     eval_every: int = 500_000
     eval_envs: int = 8
     eval_steps: int = 400
@@ -329,6 +334,12 @@ def train_locomotion_ppo(
     unknown = sorted(set(config.env_options) - set(skill.env_options))
     if unknown:
         raise ValueError(f"the {skill.name} skill's env takes no {unknown} (it takes {list(skill.env_options) or 'none'})")
+    # Applied to the collector's env, so the learner (and its normaliser) only ever see the turned observations.
+    frame: nn.Module | None = None
+    if config.command_frame:
+        if skill.command_frame is None:
+            raise ValueError(f"the {skill.name} skill has no command frame (command_frame=True is for the humanoid)")
+        frame = skill.command_frame()
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     config_path = run_dir / _CONFIG
@@ -421,6 +432,8 @@ def train_locomotion_ppo(
 
     def evaluate() -> dict[str, float]:
         folded = fold_observation_normalisation(norm, body)
+        if frame is not None:
+            folded = nn.Sequential(frame, *folded)  # reads the env's own observations, as the maze expert gives them
         # On the run's own task (a curriculum stage's commands); the final stage's is the skill's.
         result = evaluate_locomotion(folded, skill=skill, envs=config.eval_envs, steps=config.eval_steps, env_options=env_options())
         score = upright_speed(result)
@@ -447,7 +460,7 @@ def train_locomotion_ppo(
         counters["collect_seed"] += 1
         env = skill.make_env(config.num_envs, counters["collect_seed"], **env_options())
         collector = Collector(
-            env,
+            env if frame is None else TransformedEnv(env, UnaryTransform(["observation"], ["observation"], fn=frame)),
             actor,
             frames_per_batch=config.frames_per_batch,
             total_frames=math.ceil(remaining / config.frames_per_batch) * config.frames_per_batch,
@@ -572,6 +585,7 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--widen-step", type=float, default=None, help="radians the commands widen by at the gate (default pi/4)")
     parser.add_argument("--eval-envs", type=int, default=None, help="simulations per evaluation (default 8)")
+    parser.add_argument("--command-frame", action="store_true", help="learn on observations turned into the command's frame (humanoid)")
     parser.add_argument("--init-from", default=None, help="a PPO resume_state.pt whose learner starts this new run (a curriculum stage)")
     add_output_argument(parser)
     parser.add_argument("--threads", type=int, default=1, help="torch threads (one is fastest on small CPUs)")
@@ -597,6 +611,7 @@ def main(argv: list[str] | None = None) -> None:
         "widen_gate": args.widen_gate,
         "widen_step": args.widen_step,
         "eval_envs": args.eval_envs,
+        "command_frame": True if args.command_frame else None,
     }
     config = replace(PPOLocomotionConfig(), **{k: v for k, v in overrides.items() if v is not None})
     run_dir = Path(args.run_dir or f"runs/{skill.name}_ppo")

@@ -31,7 +31,7 @@ from torchrl_causal.envs.mujoco_maze import BatchedSimulation
 __all__ = ["DirectionalLocomotionEnv", "load_skill_network", "make_skill_network", "root_heading"]
 
 
-def make_skill_network(observation_dim: int, action_dim: int, hidden: int = 256) -> nn.Module:
+def make_skill_network(observation_dim: int, action_dim: int, hidden: int = 256) -> nn.Sequential:
     """A skill's policy body: ``observation -> (pre-tanh mean, log-std)``, each ``action_dim`` wide.
 
     Two hidden ReLU layers of ``hidden`` units (OGBench's 2 x 256 SAC networks).
