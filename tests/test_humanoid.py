@@ -237,7 +237,7 @@ def test_a_command_spread_outside_zero_to_pi_is_refused():
 # -- the maze expert's wiring (no trained skill ships yet) -------------------------------------
 
 
-@pytest.mark.parametrize("command_frame", [False, True])
+@pytest.mark.parametrize("command_frame", [None, -math.pi / 2])
 def test_maze_expert_steers_the_skill_towards_the_planner_waypoint_and_never_reads_w(tmp_path, command_frame):
     from torchrl_causal.envs import HumanoidMazeExpert, MazePlanner
     from torchrl_causal.envs.humanoid import humanoid_skill_network
@@ -339,3 +339,10 @@ def test_turning_the_world_turns_only_the_command_frame_vectors_and_the_frame_un
     com = COMMAND_FRAME_VECTORS[0]
     along = float(before[com : com + 2] @ torch.from_numpy(command))
     assert abs(float(frame(before)[com]) - along) < 1e-12  # C's first component is its speed along the command
+    # At another angle: the same invariance, the command pointing there, the vectors turned with it.
+    aside = CommandFrame(yaw).double()
+    torch.testing.assert_close(aside(after), aside(before), rtol=0, atol=1e-8)
+    # (the angle is a float32 buffer: its rounding, ~1e-7, shows in what it turns)
+    torch.testing.assert_close(aside(before)[-2:], torch.tensor([math.cos(yaw), math.sin(yaw)], dtype=torch.float64), rtol=0, atol=1e-6)
+    for i in COMMAND_FRAME_VECTORS:
+        torch.testing.assert_close(aside(before)[i : i + 2], torch.from_numpy(turn) @ frame(before)[i : i + 2], rtol=0, atol=1e-6)

@@ -107,6 +107,7 @@ def test_resume_refuses_another_config_or_a_sac_state(tmp_path) -> None:
         ({"init_scale": 0.0}, "init_scale must be > 0.01"),
         ({"command_spread": -0.1}, r"command_spread must lie in \[0, pi\]"),
         ({"desired_kl": 0.0}, "desired_kl must be > 0"),
+        ({"command_frame": math.inf}, "command_frame must be a finite angle"),
         ({"desired_kl": 0.01, "anneal_lr": True}, "excludes anneal_lr"),
     ],
 )
@@ -278,7 +279,7 @@ def test_a_command_frame_run_learns_on_turned_observations_and_exports_a_body_fo
     # A world-frame learner starts a command-frame run: the frame is no part of the learner's state.
     train_locomotion_ppo(
         tmp_path / "turned",
-        _config(3 * FRAMES, hidden=256, command_frame=True),
+        _config(3 * FRAMES, hidden=256, command_frame=-math.pi / 2),
         init_from=tmp_path / "world" / "resume_state.pt",
         output=tmp_path / "turned.pt",
         progress_bar=False,
@@ -286,7 +287,7 @@ def test_a_command_frame_run_learns_on_turned_observations_and_exports_a_body_fo
     state = torch.load(tmp_path / "turned" / "resume_state.pt", weights_only=True)
     assert not any("command_frame" in key for key in state["loss"])
     body = load_humanoid_locomotion_network(tmp_path / "turned.pt")
-    assert isinstance(body[0], CommandFrame)
+    assert isinstance(body[0], CommandFrame) and float(body[0].command_frame) == pytest.approx(-math.pi / 2)
     observation = torch.randn(4, SKILLS["humanoid"].observation_dim)
     observation[:, -2:] = torch.nn.functional.normalize(observation[:, -2:], dim=-1)
     turned = observation.clone()  # the world turned by 180 degrees: the exported body acts the same
@@ -294,4 +295,4 @@ def test_a_command_frame_run_learns_on_turned_observations_and_exports_a_body_fo
         turned[:, i : i + 2] = -observation[:, i : i + 2]
     torch.testing.assert_close(body(turned), body(observation), rtol=1e-5, atol=1e-5)
     with pytest.raises(ValueError, match="the ant skill has no command frame"):
-        train_locomotion_ppo(tmp_path / "ant", _config(FRAMES, command_frame=True), skill="ant", progress_bar=False)
+        train_locomotion_ppo(tmp_path / "ant", _config(FRAMES, command_frame=0.0), skill="ant", progress_bar=False)

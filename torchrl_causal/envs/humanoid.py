@@ -165,66 +165,76 @@ HUMANOID_LOCOMOTION_WEIGHTS = pathlib.Path(__file__).parent / "assets" / "humano
 
 
 class CommandFrame(torch.nn.Module):
-    """Turns a skill observation's ground-plane vectors into the command's frame: a yaw-free input.
+    """Turns a skill observation's ground-plane vectors so the command points at a fixed ``angle``: a yaw-free input.
 
     The skill's observation is OGBench's: egocentric except three world-frame ground-plane
     vectors, the centre-of-mass velocity (C's x, y), the root's linear velocity (the first two
     of ``qvel``, J) and the command. Open ground, the standing start (uniform yaw) and the
     tremors are all symmetric under a turn of the world about the vertical, so the best
     response to an observation is the same after turning those three vectors together; this
-    module picks the turn that points the command along +x (the output's command slots are then
-    always ``(1, 0)``). Its output is a function of the observation alone, so the skill still
-    reads only the expert's variables (no yaw, which the observation lacks); what it spares the
-    policy is learning the same steering once per world direction (the world-frame KL stage's
-    body, fed this frame, walks at a third of its speed: it had not learnt the symmetry).
+    module picks, per observation, the turn that points the command at ``angle`` (radians from
+    +x; the output's command slots are then always ``(cos angle, sin angle)``). Its output is a
+    function of the observation alone, so the skill still reads only the expert's variables (no
+    yaw, which the observation lacks); what it spares the policy is learning the same steering
+    once per world direction. A world-frame body had not learnt that symmetry: the KL stage's
+    body at 20.0M, fed this frame, walks straight ahead at 0.27 m/s with ``angle`` 0 and at
+    0.68 m/s with ``angle`` -pi/2 (16 envs), which is why a run continuing a world-frame learner
+    chooses the angle.
 
-    Its persistent ``command_frame`` buffer marks an exported body that starts with it
-    (:func:`load_humanoid_locomotion_network` rebuilds the same network from the keys).
+    Its persistent ``command_frame`` buffer holds ``angle`` and marks an exported body that
+    starts with this module (:func:`load_humanoid_locomotion_network` rebuilds the network from
+    the keys, and the buffer brings the angle back).
 
     Examples:
-        >>> frame = CommandFrame()
+        >>> frame = CommandFrame(angle=math.pi / 2)
         >>> observation = torch.randn(3, HUMANOID_SKILL_OBSERVATION_DIM)
         >>> observation[:, -2:] = torch.nn.functional.normalize(observation[:, -2:], dim=-1)
         >>> turned = observation.clone()  # the same situation with the world turned by 90 degrees
         >>> for i in COMMAND_FRAME_VECTORS:
         ...     turned[:, i], turned[:, i + 1] = -observation[:, i + 1], observation[:, i]
-        >>> torch.allclose(frame(observation), frame(turned), atol=1e-6), frame(observation)[0, -2:].tolist()
-        (True, [1.0, 0.0])
+        >>> torch.allclose(frame(observation), frame(turned), atol=1e-6), frame(observation)[0, -2:].abs().round().tolist()
+        (True, [0.0, 1.0])
     """
 
-    def __init__(self) -> None:
+    def __init__(self, angle: float = 0.0) -> None:
         super().__init__()
-        self.register_buffer("command_frame", torch.ones(()))
+        if not math.isfinite(angle):
+            raise ValueError(f"the command frame's angle must be a finite number of radians, got {angle}")
+        self.register_buffer("command_frame", torch.tensor(float(angle)))
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
         command = observation[..., _COMMAND : _COMMAND + 2]
-        cos, sin = command[..., :1], command[..., 1:]
+        angle = self.get_buffer("command_frame")
+        target = torch.stack((torch.cos(angle), torch.sin(angle))).to(observation.dtype)
+        # cos / sin of (angle - the command's angle): the turn that takes the command onto the target.
+        cos = command[..., :1] * target[0] + command[..., 1:] * target[1]
+        sin = command[..., :1] * target[1] - command[..., 1:] * target[0]
         out = observation.clone()
         for i in COMMAND_FRAME_VECTORS[:-1]:
             x, y = observation[..., i : i + 1], observation[..., i + 1 : i + 2]
-            out[..., i : i + 2] = torch.cat((cos * x + sin * y, cos * y - sin * x), dim=-1)  # R(-angle of command)
-        out[..., _COMMAND] = 1.0
-        out[..., _COMMAND + 1] = 0.0
+            out[..., i : i + 2] = torch.cat((cos * x - sin * y, sin * x + cos * y), dim=-1)
+        out[..., _COMMAND : _COMMAND + 2] = target
         return out
 
 
-def humanoid_skill_network(hidden: int = 256, *, command_frame: bool = False) -> torch.nn.Sequential:
-    """The humanoid skill's policy body (69 -> 2 x 21), behind a :class:`CommandFrame` if ``command_frame``.
+def humanoid_skill_network(hidden: int = 256, *, command_frame: float | None = None) -> torch.nn.Sequential:
+    """The humanoid skill's policy body (69 -> 2 x 21), behind a :class:`CommandFrame` at that angle unless ``None``.
 
     Examples:
-        >>> list(humanoid_skill_network(8, command_frame=True).state_dict())[:2]
+        >>> list(humanoid_skill_network(8, command_frame=0.0).state_dict())[:2]
         ['0.command_frame', '1.weight']
     """
     body = make_skill_network(HUMANOID_SKILL_OBSERVATION_DIM, 21, hidden)
-    return torch.nn.Sequential(CommandFrame(), *body) if command_frame else body
+    return body if command_frame is None else torch.nn.Sequential(CommandFrame(command_frame), *body)
 
 
-def _stored_command_frame(path: pathlib.Path) -> bool:
-    """Whether the weights at ``path`` start with a :class:`CommandFrame` (``False`` when unreadable: the load says why)."""
+def _stored_command_frame(path: pathlib.Path) -> float | None:
+    """The :class:`CommandFrame` angle the weights at ``path`` start with (``None``: none, or unreadable: the load says why)."""
     try:
-        return "0.command_frame" in torch.load(path, map_location="cpu", weights_only=True)
+        angle = torch.load(path, map_location="cpu", weights_only=True).get("0.command_frame")
     except Exception:  # a missing or corrupt file: load_skill_network's error names it
-        return False
+        return None
+    return None if angle is None else float(angle)
 
 
 def load_humanoid_locomotion_network(path: str | pathlib.Path = HUMANOID_LOCOMOTION_WEIGHTS) -> torch.nn.Module:

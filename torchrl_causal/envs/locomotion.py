@@ -135,9 +135,9 @@ class LocomotionSkill:
         weights: where the package ships the skill's policy body (the default export).
         defaults: the :class:`LocomotionConfig` fields this skill changes.
         env_options: the names ``make_env`` accepts as ``options``.
-        command_frame: makes the module that turns this skill's observations into the command's
-            frame (:class:`~torchrl_causal.envs.humanoid.CommandFrame`), or ``None`` where the
-            skill has none (the PPO trainer's ``command_frame`` option).
+        command_frame: ``angle -> module`` turning this skill's observations so the command points
+            at ``angle`` (:class:`~torchrl_causal.envs.humanoid.CommandFrame`), or ``None`` where
+            the skill has none (the PPO trainer's ``command_frame`` option).
     """
 
     name: str
@@ -147,7 +147,7 @@ class LocomotionSkill:
     weights: Path
     defaults: dict[str, Any] = field(default_factory=dict)
     env_options: tuple[str, ...] = ()
-    command_frame: Callable[[], nn.Module] | None = None
+    command_frame: Callable[[float], nn.Module] | None = None
 
     def config(self, **overrides: Any) -> LocomotionConfig:
         """The skill's default :class:`LocomotionConfig` with ``overrides`` (``None`` values ignored)."""

@@ -95,9 +95,10 @@ class PPOLocomotionConfig:
     reaches the gate, the spread widens by ``widen_step`` for the rest of the run, up to pi (uniform,
     the skill's task). Each spread selects its own best body (a wider one is a harder task, so
     scores across spreads do not compare): the export is the best at the widest spread reached.
-    ``command_frame`` makes the learner read observations turned into the command's frame (the
-    skill's :class:`~torchrl_causal.envs.humanoid.CommandFrame`, applied to the collector's env;
-    the exported body starts with it, so it reads the env's own observations).
+    ``command_frame`` (``None``: the world frame) makes the learner read observations turned so
+    that the command points at that angle (the skill's
+    :class:`~torchrl_causal.envs.humanoid.CommandFrame`, applied to the collector's env; the
+    exported body starts with it, so it reads the env's own observations).
     """
 
     total_steps: int = 30_000_000
@@ -121,7 +122,7 @@ class PPOLocomotionConfig:
     command_spread: float | None = None
     widen_gate: float | None = None
     widen_step: float = math.pi / 4
-    command_frame: bool = False
+    command_frame: float | None = None
     eval_every: int = 500_000
     eval_envs: int = 8
     eval_steps: int = 400
@@ -147,6 +148,8 @@ class PPOLocomotionConfig:
             raise ValueError(f"init_scale must be > 0.01, got {self.init_scale}")
         if self.speed_weight is not None and not self.speed_weight >= 0:
             raise ValueError(f"speed_weight must be >= 0, got {self.speed_weight}")
+        if self.command_frame is not None and not math.isfinite(self.command_frame):
+            raise ValueError(f"command_frame must be a finite angle (radians) or None, got {self.command_frame}")
         if self.command_spread is not None and not 0 <= self.command_spread <= math.pi:
             raise ValueError(f"command_spread must lie in [0, pi], got {self.command_spread} (--command-spread pi: uniform)")
         if self.widen_gate is not None:
@@ -336,10 +339,11 @@ def train_locomotion_ppo(
         raise ValueError(f"the {skill.name} skill's env takes no {unknown} (it takes {list(skill.env_options) or 'none'})")
     # Applied to the collector's env, so the learner (and its normaliser) only ever see the turned observations.
     frame: nn.Module | None = None
-    if config.command_frame:
-        if skill.command_frame is None:
-            raise ValueError(f"the {skill.name} skill has no command frame (command_frame=True is for the humanoid)")
-        frame = skill.command_frame()
+    if config.command_frame is not None:
+        make_frame = skill.command_frame
+        if make_frame is None:
+            raise ValueError(f"the {skill.name} skill has no command frame (command_frame is for the humanoid)")
+        frame = make_frame(config.command_frame)
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     config_path = run_dir / _CONFIG
@@ -585,7 +589,12 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--widen-step", type=float, default=None, help="radians the commands widen by at the gate (default pi/4)")
     parser.add_argument("--eval-envs", type=int, default=None, help="simulations per evaluation (default 8)")
-    parser.add_argument("--command-frame", action="store_true", help="learn on observations turned into the command's frame (humanoid)")
+    parser.add_argument(
+        "--command-frame",
+        type=_angle,
+        default=None,
+        help="learn on observations turned so the command points at this angle (rad, or 'pi'; humanoid)",
+    )
     parser.add_argument("--init-from", default=None, help="a PPO resume_state.pt whose learner starts this new run (a curriculum stage)")
     add_output_argument(parser)
     parser.add_argument("--threads", type=int, default=1, help="torch threads (one is fastest on small CPUs)")
@@ -611,7 +620,7 @@ def main(argv: list[str] | None = None) -> None:
         "widen_gate": args.widen_gate,
         "widen_step": args.widen_step,
         "eval_envs": args.eval_envs,
-        "command_frame": True if args.command_frame else None,
+        "command_frame": args.command_frame,
     }
     config = replace(PPOLocomotionConfig(), **{k: v for k, v in overrides.items() if v is not None})
     run_dir = Path(args.run_dir or f"runs/{skill.name}_ppo")
