@@ -54,7 +54,9 @@ def evaluate(robot: str, maze: str, regime: str, radius: float, episodes: int, b
 
 
 def falls_and_reach(maze: str, batch: int, seed: int, weights: str | None, fall_height: float = 0.9) -> None:
-    """Prints each humanoid episode's first fall (step, or -) and distance from the start (m) at its end."""
+    """Prints each humanoid episode's first fall (step, or -), its distance from the start (m) at its
+    end, and its distance to the goal at the end and at its closest (a body that walks the path but
+    misses the success radius shows here)."""
     env = HumanoidMazeEnv(maze, batch_size=batch, regime="train", seed=seed, success_radius=0.45)
     expert = HumanoidMazeExpert(env, **({} if weights is None else {"weights": weights}))
     td = env.reset()
@@ -68,10 +70,16 @@ def falls_and_reach(maze: str, batch: int, seed: int, weights: str | None, fall_
     last = torch.where(done.any(1), done.float().argmax(1), torch.full((batch,), done.shape[1] - 1))
     end = rollout["next", "P"][torch.arange(batch), last]
     reached = rollout["next", "success"].squeeze(-1).any(1)
+    goal = torch.as_tensor(env.goal_xy, dtype=end.dtype)
+    to_goal = (rollout["next", "P"][..., :2] - goal).norm(dim=-1)
     for index in range(batch):
         fall = "-" if first_fall[index] < 0 else str(int(first_fall[index]))
         walked = float((end[index] - start[index]).norm())
-        print(f"episode {index}: success {bool(reached[index])}, first fall {fall}, {walked:.1f} m from the start")
+        print(
+            f"episode {index}: success {bool(reached[index])}, first fall {fall}, {walked:.1f} m from the start, "
+            f"{float(to_goal[index, last[index]]):.1f} m from the goal at step {int(last[index]) + 1} "
+            f"(closest {float(to_goal[index, : last[index] + 1].min()):.1f} m)"
+        )
     print(f"{int(reached.sum())} of {batch} reached the goal, {int((first_fall >= 0).sum())} fell")
 
 
