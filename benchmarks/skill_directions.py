@@ -10,8 +10,8 @@ one markdown row per body, and each body's uniform speed as a ratio of the first
     OMP_NUM_THREADS=1 python benchmarks/skill_directions.py --weights A/best_body.pt B/best_body.pt --envs 32
 
 Each spread is ``evaluate_locomotion(body, skill="humanoid", envs=N, steps=400,
-env_options={"command_spread": s, "speed_weight": 2.5})`` (the same simulations for every body:
-one seed). ~25 s per body and spread at 32 envs on one core of a 2-core AMD EPYC.
+env_options={"command_spread": s})`` (the same simulations for every body: one seed). About
+30 s per body (four spreads) at 32 envs on one core of a 2-core AMD EPYC.
 """
 
 from __future__ import annotations
@@ -34,7 +34,6 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--weights", type=Path, nargs="+", required=True, help="skill bodies (state dicts) to compare")
     parser.add_argument("--envs", type=int, default=32, help="simulations per spread")
     parser.add_argument("--steps", type=int, default=400, help="control steps per simulation (40 Hz)")
-    parser.add_argument("--speed-weight", type=float, default=2.5, help="the env's reward setting (does not change the rollout)")
     args = parser.parse_args(argv)
     missing = [str(path) for path in args.weights if not path.is_file()]
     if missing:
@@ -56,7 +55,7 @@ def main(argv: list[str] | None = None) -> None:
                 skill="humanoid",
                 envs=args.envs,
                 steps=args.steps,
-                env_options={"command_spread": spread, "speed_weight": args.speed_weight},
+                env_options={"command_spread": spread},  # the reward's weights do not change a deterministic rollout
             )
             cells.append(f"{result['speed']:.2f} / {result['fall_rate']:.0%}")
             uniform = result["speed"]
