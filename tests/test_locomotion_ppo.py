@@ -109,6 +109,9 @@ def test_resume_refuses_another_config_or_a_sac_state(tmp_path) -> None:
         ({"desired_kl": 0.0}, "desired_kl must be > 0"),
         ({"command_frame": math.inf}, "command_frame must be a finite angle"),
         ({"desired_kl": 0.01, "anneal_lr": True}, "excludes anneal_lr"),
+        ({"direction_period": (200, 100)}, "direction_period must be two steps 1 <= low <= high"),
+        ({"direction_period": (0, 10)}, "direction_period must be two steps"),
+        ({"direction_period": (100,)}, "direction_period must be two steps"),
     ],
 )
 def test_bad_configs_are_refused_in_one_line(change, message) -> None:
@@ -228,6 +231,8 @@ def test_the_command_line_sets_the_config_it_names(tmp_path, monkeypatch) -> Non
     locomotion_ppo.main(argv)  # no --output: the export stays in the run directory, never the package's weights
     locomotion_ppo.main([*argv, "--command-spread", "pi"])  # uniform commands, exactly (3.1416 would be refused)
     assert seen["config"].command_spread == math.pi
+    locomotion_ppo.main([*argv, "--direction-period", "300", "600"])
+    assert seen["config"].direction_period == (300, 600)
     assert seen["output"] == tmp_path / "export.pt" and seen["output"] != SKILLS["humanoid"].weights
     with pytest.raises(ValueError, match="need 0 < gamma < 1"):
         locomotion_ppo.main(["--run-dir", str(tmp_path), "--gamma", "1.0"])
@@ -296,3 +301,28 @@ def test_a_command_frame_run_learns_on_turned_observations_and_exports_a_body_fo
     torch.testing.assert_close(body(turned), body(observation), rtol=1e-5, atol=1e-5)
     with pytest.raises(ValueError, match="the ant skill has no command frame"):
         train_locomotion_ppo(tmp_path / "ant", _config(FRAMES, command_frame=0.0), skill="ant", progress_bar=False)
+
+
+def test_longer_command_legs_reach_the_training_env_only_and_the_run_resumes_with_them(tmp_path, monkeypatch) -> None:
+    import torchrl_causal.envs.locomotion_ppo as ppo
+
+    evaluated_options = []
+
+    def fake_evaluation(*args, env_options, **kwargs):
+        evaluated_options.append(dict(env_options))
+        return {"speed": 0.1, "fall_rate": 0.0, "steps_to_fall": 10.0}
+
+    envs = []
+    humanoid = SKILLS["humanoid"]
+    skill = replace(humanoid, make_env=lambda *args, **kwargs: envs.append(humanoid.make_env(*args, **kwargs)) or envs[-1])
+    monkeypatch.setattr(ppo, "evaluate_locomotion", fake_evaluation)
+    train_locomotion_ppo(tmp_path, _config(2 * FRAMES, direction_period=(300, 600)), skill=skill, progress_bar=False)
+    assert envs[0].direction_period == (300, 600)
+    assert evaluated_options and all("direction_period" not in options for options in evaluated_options)  # the skill's task
+    # The run dir's config.json holds the period as a list: the same run continues, another period is refused.
+    train_locomotion_ppo(tmp_path, _config(4 * FRAMES, direction_period=(300, 600)), skill=skill, progress_bar=False)
+    assert torch.load(tmp_path / "resume_state.pt", weights_only=True)["progress"] == 4 * FRAMES
+    with pytest.raises(ValueError, match=r"changed: \['direction_period'\]"):
+        train_locomotion_ppo(tmp_path, _config(6 * FRAMES, direction_period=(300, 500)), skill=skill, progress_bar=False)
+    with pytest.raises(ValueError, match=r"ant skill's env takes no \['direction_period'\]"):
+        train_locomotion_ppo(tmp_path / "ant", _config(FRAMES, direction_period=(300, 600)), skill="ant", progress_bar=False)

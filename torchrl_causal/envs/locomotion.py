@@ -177,7 +177,7 @@ SKILLS: dict[str, LocomotionSkill] = {
             "eval_every": 50_000,
             "eval_steps": 400,
         },
-        env_options=("speed_weight", "command_spread"),
+        env_options=("speed_weight", "command_spread", "direction_period"),
         command_frame=CommandFrame,
     ),
 }
@@ -313,7 +313,12 @@ def check_same_config(saved: dict[str, Any], config: Any, where: str | Path) -> 
     :data:`BOOKKEEPING`); ``config`` is a dataclass, and fields added since the run started
     keep their default."""
     defaults = asdict(type(config)())
-    changed = sorted(k for k, v in asdict(config).items() if k not in BOOKKEEPING and saved.get(k, defaults[k]) != v)
+
+    # Compared as JSON reads them back (a saved tuple is a list there).
+    def plain(value: Any) -> Any:
+        return json.loads(json.dumps(value))
+
+    changed = sorted(k for k, v in asdict(config).items() if k not in BOOKKEEPING and plain(saved.get(k, defaults[k])) != plain(v))
     if changed:
         raise ValueError(f"{where} was trained with another config (changed: {changed}); use a new --run-dir or the same settings")
 

@@ -99,6 +99,9 @@ class PPOLocomotionConfig:
     that the command points at that angle (the skill's
     :class:`~torchrl_causal.envs.humanoid.CommandFrame`, applied to the collector's env; the
     exported body starts with it, so it reads the env's own observations).
+    ``direction_period`` (``None``: the env's, 100-200 steps) is the inclusive range of steps between
+    the training env's command redraws; the evaluation keeps the skill's task, so a run that walks
+    longer legs (as a maze's corridors ask) scores on the same commands as one that does not.
     """
 
     total_steps: int = 30_000_000
@@ -123,6 +126,7 @@ class PPOLocomotionConfig:
     widen_gate: float | None = None
     widen_step: float = math.pi / 4
     command_frame: float | None = None
+    direction_period: tuple[int, int] | None = None
     eval_every: int = 500_000
     eval_envs: int = 8
     eval_steps: int = 400
@@ -150,6 +154,11 @@ class PPOLocomotionConfig:
             raise ValueError(f"speed_weight must be >= 0, got {self.speed_weight}")
         if self.command_frame is not None and not math.isfinite(self.command_frame):
             raise ValueError(f"command_frame must be a finite angle (radians) or None, got {self.command_frame}")
+        if self.direction_period is not None:
+            period = tuple(self.direction_period)
+            if len(period) != 2 or not all(isinstance(n, int) for n in period) or not 1 <= period[0] <= period[1]:
+                raise ValueError(f"direction_period must be two steps 1 <= low <= high, got {self.direction_period!r}")
+            object.__setattr__(self, "direction_period", period)  # a JSON list read back compares as the tuple
         if self.command_spread is not None and not 0 <= self.command_spread <= math.pi:
             raise ValueError(f"command_spread must lie in [0, pi], got {self.command_spread} (--command-spread pi: uniform)")
         if self.widen_gate is not None:
@@ -334,7 +343,8 @@ def train_locomotion_ppo(
     if resume_from is not None and init_from is not None:
         raise ValueError("give resume_from (continue a run) or init_from (start a new run from its learner), not both")
     skill = SKILLS[skill] if isinstance(skill, str) else skill
-    unknown = sorted(set(config.env_options) - set(skill.env_options))
+    collector_options = {} if config.direction_period is None else {"direction_period": config.direction_period}
+    unknown = sorted((set(config.env_options) | set(collector_options)) - set(skill.env_options))
     if unknown:
         raise ValueError(f"the {skill.name} skill's env takes no {unknown} (it takes {list(skill.env_options) or 'none'})")
     # Applied to the collector's env, so the learner (and its normaliser) only ever see the turned observations.
@@ -462,7 +472,7 @@ def train_locomotion_ppo(
     if remaining > 0:
         # A resumed run draws fresh episodes from a new seed (the simulations are not saved).
         counters["collect_seed"] += 1
-        env = skill.make_env(config.num_envs, counters["collect_seed"], **env_options())
+        env = skill.make_env(config.num_envs, counters["collect_seed"], **env_options(), **collector_options)
         collector = Collector(
             env if frame is None else TransformedEnv(env, UnaryTransform(["observation"], ["observation"], fn=frame)),
             actor,
@@ -595,6 +605,14 @@ def main(argv: list[str] | None = None) -> None:
         default=None,
         help="learn on observations turned so the command points at this angle (rad, or 'pi'; humanoid)",
     )
+    parser.add_argument(
+        "--direction-period",
+        type=int,
+        nargs=2,
+        metavar=("LOW", "HIGH"),
+        default=None,
+        help="steps between the training commands' redraws, drawn in [LOW, HIGH] (humanoid; default 100 200)",
+    )
     parser.add_argument("--init-from", default=None, help="a PPO resume_state.pt whose learner starts this new run (a curriculum stage)")
     add_output_argument(parser)
     parser.add_argument("--threads", type=int, default=1, help="torch threads (one is fastest on small CPUs)")
@@ -621,6 +639,7 @@ def main(argv: list[str] | None = None) -> None:
         "widen_step": args.widen_step,
         "eval_envs": args.eval_envs,
         "command_frame": args.command_frame,
+        "direction_period": None if args.direction_period is None else tuple(args.direction_period),
     }
     config = replace(PPOLocomotionConfig(), **{k: v for k, v in overrides.items() if v is not None})
     run_dir = Path(args.run_dir or f"runs/{skill.name}_ppo")
