@@ -251,7 +251,7 @@ def test_maze_expert_steers_the_skill_towards_the_planner_waypoint_and_never_rea
     action = expert(td.clone())["action"]
     # independently: OGBench's skill input (its get_ob without xy), then the unit vector to the waypoint
     reference = _ogbench_medium()
-    planner = MazePlanner(env.layout, env.task.goal_cell, lookahead=3, clearance=1.0)
+    planner = MazePlanner(env.layout, env.task.goal_cell, lookahead=3, clearance=0.45)  # the humanoid's box
     to_waypoint = planner.waypoint(td["P"]) - td["P"]
     direction = to_waypoint / to_waypoint.norm(dim=-1, keepdim=True)
     for index, data in enumerate(env.simulator.datas):
