@@ -45,29 +45,37 @@ ROBOTS = {
 }
 
 
-def evaluate(robot: str, maze: str, regime: str, radius: float, episodes: int, batch: int, seed: int, weights: str | None):
+def _expert_options(weights: str | None, clearance: float | None) -> dict:
+    return {**({} if weights is None else {"weights": weights}), **({} if clearance is None else {"clearance": clearance})}
+
+
+def evaluate(
+    robot: str, maze: str, regime: str, radius: float, episodes: int, batch: int, seed: int, weights: str | None, clearance: float | None
+):
     env = ROBOTS[robot].env(maze, batch_size=batch, regime=regime, seed=seed, success_radius=radius)
-    expert = ROBOTS[robot].expert(env, **({} if weights is None else {"weights": weights}))
+    expert = ROBOTS[robot].expert(env, **_expert_options(weights, clearance))
     result = evaluate_policy(env, expert, episodes=episodes, max_steps=env.horizon, regime=regime, seeds=(seed,))
     env.close()
     return result
 
 
-def falls_and_reach(maze: str, batch: int, seed: int, weights: str | None, fall_height: float = 0.9) -> None:
+def falls_and_reach(maze: str, batch: int, seed: int, weights: str | None, clearance: float | None, fall_height: float = 0.9) -> None:
     """Prints each humanoid episode's first fall (step, or -), its distance from the start (m) at its
     end, and its distance to the goal at the end and at its closest (a body that walks the path but
     misses the success radius shows here)."""
     env = HumanoidMazeEnv(maze, batch_size=batch, regime="train", seed=seed, success_radius=0.45)
-    expert = HumanoidMazeExpert(env, **({} if weights is None else {"weights": weights}))
+    expert = HumanoidMazeExpert(env, **_expert_options(weights, clearance))
     td = env.reset()
     start = td["P"].clone()
     with torch.no_grad():
         rollout = env.rollout(env.horizon, expert, tensordict=td, auto_reset=False, break_when_any_done=False)
     env.close()
-    fallen = rollout["next", "H"][..., 0] < fall_height
-    first_fall = torch.where(fallen.any(1), fallen.float().argmax(1), -1)
     done = rollout["next", "done"].squeeze(-1)
     last = torch.where(done.any(1), done.float().argmax(1), torch.full((batch,), done.shape[1] - 1))
+    # The envs step on after a success (no reset): only the episode's own steps count.
+    within = torch.arange(done.shape[1]) <= last[:, None]
+    fallen = (rollout["next", "H"][..., 0] < fall_height) & within
+    first_fall = torch.where(fallen.any(1), fallen.float().argmax(1), -1)
     end = rollout["next", "P"][torch.arange(batch), last]
     reached = rollout["next", "success"].squeeze(-1).any(1)
     goal = torch.as_tensor(env.goal_xy, dtype=end.dtype)
@@ -80,7 +88,13 @@ def falls_and_reach(maze: str, batch: int, seed: int, weights: str | None, fall_
             f"{float(to_goal[index, last[index]]):.1f} m from the goal at step {int(last[index]) + 1} "
             f"(closest {float(to_goal[index, : last[index] + 1].min()):.1f} m)"
         )
-    print(f"{int(reached.sum())} of {batch} reached the goal, {int((first_fall >= 0).sum())} fell")
+    steps = sorted(int(last[index]) + 1 for index in range(batch) if reached[index])
+    upright_failures = (~reached & (first_fall < 0)).nonzero().flatten().tolist()
+    closest = sorted(round(float(to_goal[i, : last[i] + 1].min()), 1) for i in upright_failures)
+    print(
+        f"{maze}: {int(reached.sum())} of {batch} reached the goal (at steps {steps}), {int((first_fall >= 0).sum())} fell; "
+        f"closest approach of the upright failures (m): {closest}"
+    )
 
 
 def main() -> None:
@@ -93,6 +107,7 @@ def main() -> None:
     parser.add_argument("--batch", type=int, default=50, help="parallel episodes")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--weights", default=None, help="locomotion state dict (default: the shipped one)")
+    parser.add_argument("--clearance", type=float, default=None, help="the planner's line-of-sight half-width (m; default: the expert's)")
     parser.add_argument("--output", default=None, help="write the markdown table here too")
     parser.add_argument("--falls", action="store_true", help="humanoid: per-episode first fall and distance walked instead")
     args = parser.parse_args()
@@ -101,7 +116,7 @@ def main() -> None:
         if args.robot != "humanoid":
             parser.error("--falls reads the humanoid's head height: use it with --robot humanoid")
         for maze in args.mazes:
-            falls_and_reach(maze, args.batch, args.seed, args.weights)
+            falls_and_reach(maze, args.batch, args.seed, args.weights, args.clearance)
         return
 
     lines = [
@@ -114,7 +129,7 @@ def main() -> None:
     for maze in args.mazes:
         for radius in args.radius:
             for regime in args.regimes:
-                r = evaluate(args.robot, maze, regime, radius, args.episodes, args.batch, args.seed, args.weights)
+                r = evaluate(args.robot, maze, regime, radius, args.episodes, args.batch, args.seed, args.weights, args.clearance)
                 p = robot.paper[maze]
                 paper = f"{p[0]}% / {p[1]} ± {p[2]} / {p[3]}" if regime == "train" else "—"
                 lines.append(

@@ -170,11 +170,8 @@ def test_every_group_combination_composes_validates_and_resolves_its_targets(env
             [f"env={env}", f"algo={algo}", f"window={window}", f"logger={logger}", f"scale={scale}", f"causal={causal}", "seed=4"]
         )
         resolved = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
-        if resolved["env"]["expert"] is None:  # HumanoidMaze: no expert shipped, so every run is refused
-            with pytest.raises(ConfigValueError, match="has no expert"):
-                validate_config(cfg)
-        else:
-            validate_config(cfg)
+        assert resolved["env"]["expert"] is not None  # every env ships its expert (HumanoidMaze's since issue 38)
+        validate_config(cfg)
         assert resolved["env"]["name"] == env and resolved["algo"]["name"] == algo
         assert resolved["run_dir"] == f"runs/{cfg.run_name}"
         assert cfg.run_name.endswith(f"/{run_label(algo, causal, window == 'matched')}/seed4")
@@ -465,3 +462,9 @@ def test_the_demo_runs_validate(tmp_path) -> None:
     assert DEMO_RUNS[0] == ("expert", False)  # its demonstrations feed the others
     for algo, causal in DEMO_RUNS:
         validate_config(compose_config(demo_overrides(algo, causal, tmp_path)))
+
+
+def test_an_env_without_an_expert_is_refused_with_how_to_name_one() -> None:
+    cfg = compose_config(["env=humanoidmaze_medium", "algo=bc", "env.expert=null"])
+    with pytest.raises(ConfigValueError, match=r"'humanoidmaze_medium' has no expert .*HumanoidMazeExpert, weights: PATH"):
+        validate_config(cfg)

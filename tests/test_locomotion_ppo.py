@@ -87,6 +87,7 @@ def test_a_run_resumes_from_its_small_state_on_another_machine(tmp_path) -> None
 
 
 def test_resume_refuses_another_config_or_a_sac_state(tmp_path) -> None:
+    shipped = SKILLS["humanoid"].weights.read_bytes()
     train_locomotion_ppo(tmp_path / "a", _config(FRAMES), progress_bar=False)
     state_file = tmp_path / "a" / "resume_state.pt"
     with pytest.raises(ValueError, match=r"changed: \['clip_epsilon'\]"):
@@ -95,7 +96,7 @@ def test_resume_refuses_another_config_or_a_sac_state(tmp_path) -> None:
     torch.save({"progress": 200, "skill": "humanoid", "config": {}, "loss": {}}, sac_state)  # a SAC resume state has no "algorithm"
     with pytest.raises(ValueError, match="not PPO's 'humanoid'"):
         train_locomotion_ppo(tmp_path / "c", _config(FRAMES), resume_from=sac_state, progress_bar=False)
-    assert not SKILLS["humanoid"].weights.exists()  # output=None by default: the shipped weights are untouched
+    assert SKILLS["humanoid"].weights.read_bytes() == shipped  # output=None by default: the shipped weights are untouched
 
 
 @pytest.mark.parametrize(
@@ -326,3 +327,20 @@ def test_longer_command_legs_reach_the_training_env_only_and_the_run_resumes_wit
         train_locomotion_ppo(tmp_path, _config(6 * FRAMES, direction_period=(300, 500)), skill=skill, progress_bar=False)
     with pytest.raises(ValueError, match=r"ant skill's env takes no \['direction_period'\]"):
         train_locomotion_ppo(tmp_path / "ant", _config(FRAMES, direction_period=(300, 600)), skill="ant", progress_bar=False)
+
+
+def test_a_states_current_learner_exports_as_the_run_exports_its_best(tmp_path, monkeypatch) -> None:
+    import torchrl_causal.envs.locomotion_ppo as ppo
+
+    # Rising scores: the last evaluation is the best, so the state's learner is the best body.
+    scores = iter([0.1, 0.2])
+    monkeypatch.setattr(ppo, "evaluate_locomotion", lambda *a, **k: {"speed": next(scores), "fall_rate": 0.0, "steps_to_fall": 10.0})
+    train_locomotion_ppo(tmp_path / "run", _config(4 * FRAMES, command_frame=-math.pi / 2), progress_bar=False)
+    steps = ppo.export_learner(tmp_path / "run" / "resume_state.pt", tmp_path / "current.pt")
+    assert steps == 4 * FRAMES
+    exported = torch.load(tmp_path / "current.pt", weights_only=True)
+    best = torch.load(tmp_path / "run" / "best_body.pt", weights_only=True)
+    assert exported.keys() == best.keys() and all(torch.equal(exported[k], best[k]) for k in best)
+    assert exported["0.command_frame"].item() == pytest.approx(-math.pi / 2)  # behind the run's frame, as the loader reads it
+    with pytest.raises(SystemExit):
+        ppo.main(["--export-from", str(tmp_path / "run" / "resume_state.pt")])  # no --output: refused, nothing written

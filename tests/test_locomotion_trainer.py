@@ -51,6 +51,7 @@ def test_resume_from_the_small_state_refills_the_buffer_then_updates(tmp_path):
 
 def test_resume_refuses_another_config_or_skill(tmp_path):
     # output=None (the default, spelled out): nothing is exported
+    shipped = SKILLS["humanoid"].weights.read_bytes()
     train_locomotion(tmp_path / "a", _config(FRAMES), skill="humanoid", output=None)
     state_file = tmp_path / "a" / "resume_state.pt"
     with pytest.raises(ValueError, match="updates_per_step"):
@@ -59,7 +60,7 @@ def test_resume_refuses_another_config_or_skill(tmp_path):
         train_locomotion(tmp_path / "c", _config(2 * FRAMES), skill="ant", output=None, resume_from=state_file)
     with pytest.raises(FileNotFoundError, match="no checkpoint at .*none.pt"):  # missing, not "corrupted"
         train_locomotion(tmp_path / "d", _config(2 * FRAMES), skill="humanoid", output=None, resume_from=tmp_path / "none.pt")
-    assert not any(tmp_path.rglob("*locomotion.pt")) and not SKILLS["humanoid"].weights.exists()
+    assert not any(tmp_path.rglob("*locomotion.pt")) and SKILLS["humanoid"].weights.read_bytes() == shipped
 
 
 def test_the_command_line_exports_into_its_run_directory_unless_told_otherwise(tmp_path, monkeypatch):

@@ -204,8 +204,9 @@ class HumanoidMazeExpert(_PlannedSkillExpert):
     --skill humanoid``, exported to :data:`~torchrl_causal.envs.humanoid.HUMANOID_LOCOMOTION_WEIGHTS`):
     the skill reads the expert's variables A, H, E, V, the centre-of-mass velocity
     ``("latent", "C")`` and J, with the commanded direction (OGBench's skill observation), never
-    the vibration sensor ``W``. No trained weights ship yet: the default path is refused with
-    the command that makes them.
+    the vibration sensor ``W``. The skill's weights ship with the package
+    (``results/humanoid_locomotion/README.md`` says how they were trained; a missing file is
+    refused with the command that makes them).
 
     Its lines of sight need 0.45 m of clearance, not the ant's 1.0 m: the humanoid is narrower than
     the ant's leg span, and on HumanoidMaze-Medium the wider box keeps its path ~3 m longer (one

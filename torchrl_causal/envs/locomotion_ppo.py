@@ -67,6 +67,7 @@ __all__ = [
     "PPOLocomotionConfig",
     "RunningNormalisation",
     "adapt_learning_rate",
+    "export_learner",
     "fold_observation_normalisation",
     "gaussian_kl",
     "make_ppo_actor",
@@ -348,12 +349,7 @@ def train_locomotion_ppo(
     if unknown:
         raise ValueError(f"the {skill.name} skill's env takes no {unknown} (it takes {list(skill.env_options) or 'none'})")
     # Applied to the collector's env, so the learner (and its normaliser) only ever see the turned observations.
-    frame: nn.Module | None = None
-    if config.command_frame is not None:
-        make_frame = skill.command_frame
-        if make_frame is None:
-            raise ValueError(f"the {skill.name} skill has no command frame (command_frame is for the humanoid)")
-        frame = make_frame(config.command_frame)
+    frame = _command_frame(skill, config)
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     config_path = run_dir / _CONFIG
@@ -361,21 +357,7 @@ def train_locomotion_ppo(
         check_same_config(json.loads(config_path.read_text()), config, run_dir)
     torch.manual_seed(config.seed)
 
-    norm = RunningNormalisation(skill.observation_dim)
-    body = skill.network(config.hidden)
-    actor = make_ppo_actor(body, norm, config.init_scale)
-    value = _make_value(skill, norm, config.hidden)
-    loss = ClipPPOLoss(
-        actor,
-        value,
-        clip_epsilon=config.clip_epsilon,
-        entropy_bonus=config.entropy_coeff > 0,
-        entropy_coeff=config.entropy_coeff,
-        critic_coeff=config.critic_coeff,
-        loss_critic_type="l2",
-        normalize_advantage=True,
-    )
-    loss.set_keys(sample_log_prob="action_log_prob")
+    norm, body, actor, value, loss = _make_learner(skill, config)
     advantage = GAE(gamma=config.gamma, lmbda=config.lmbda, value_network=value, average_gae=False)
     optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
     # command_spread is the curriculum's current spread (``widen_gate``); a new stage starts at its own.
@@ -445,9 +427,7 @@ def train_locomotion_ppo(
         return {**config.env_options, **({} if spread is None else {"command_spread": spread})}
 
     def evaluate() -> dict[str, float]:
-        folded = fold_observation_normalisation(norm, body)
-        if frame is not None:
-            folded = nn.Sequential(frame, *folded)  # reads the env's own observations, as the maze expert gives them
+        folded = _skill_body(norm, body, frame)
         # On the run's own task (a curriculum stage's commands); the final stage's is the skill's.
         result = evaluate_locomotion(folded, skill=skill, envs=config.eval_envs, steps=config.eval_steps, env_options=env_options())
         score = upright_speed(result)
@@ -521,6 +501,63 @@ def train_locomotion_ppo(
     if "init_from" in counters:
         record.update(init_from=counters["init_from"], init_steps=counters["init_steps"])
     return finish_skill_run(run_dir, output, record)
+
+
+def _make_learner(
+    skill: LocomotionSkill, config: PPOLocomotionConfig
+) -> tuple[RunningNormalisation, nn.Module, ProbabilisticActor, ValueOperator, ClipPPOLoss]:
+    """The normaliser, the policy body, the actor and critic that read them, and their PPO loss."""
+    norm = RunningNormalisation(skill.observation_dim)
+    body = skill.network(config.hidden)
+    actor, value = make_ppo_actor(body, norm, config.init_scale), _make_value(skill, norm, config.hidden)
+    loss = ClipPPOLoss(
+        actor,
+        value,
+        clip_epsilon=config.clip_epsilon,
+        entropy_bonus=config.entropy_coeff > 0,
+        entropy_coeff=config.entropy_coeff,
+        critic_coeff=config.critic_coeff,
+        loss_critic_type="l2",
+        normalize_advantage=True,
+    )
+    loss.set_keys(sample_log_prob="action_log_prob")
+    return norm, body, actor, value, loss
+
+
+def _command_frame(skill: LocomotionSkill, config: PPOLocomotionConfig) -> nn.Module | None:
+    """The config's command frame for this skill (``None`` without one); a skill that has none refuses."""
+    if config.command_frame is None:
+        return None
+    if skill.command_frame is None:
+        raise ValueError(f"the {skill.name} skill has no command frame (command_frame is for the humanoid)")
+    return skill.command_frame(config.command_frame)
+
+
+def _skill_body(norm: RunningNormalisation, body: nn.Module, frame: nn.Module | None) -> nn.Sequential:
+    """The exported body: the normaliser folded in, behind the command frame where the run has one
+    (so it reads the env's own observations, as the maze expert gives them)."""
+    folded = fold_observation_normalisation(norm, body)
+    return folded if frame is None else nn.Sequential(frame, *folded)
+
+
+def export_learner(state_path: str | Path, output: str | Path, *, skill: str | LocomotionSkill = "humanoid") -> int:
+    """Writes the skill body of a PPO resume state's *current* learner to ``output``; returns its env steps.
+
+    A run's ``best_body.pt`` is its best on the open-ground evaluation; the learner at a given
+    state may be the better maze walker (the evaluation's short legs and uniform commands are not
+    the maze's), so this exports the one a state holds, the same way a run exports its best: the
+    normaliser folded in, behind the run's command frame.
+    """
+    skill = SKILLS[skill] if isinstance(skill, str) else skill
+    state = _load_ppo_state(Path(state_path), skill)
+    config = replace(PPOLocomotionConfig(), **{k: v for k, v in state["config"].items() if k in asdict(PPOLocomotionConfig())})
+    norm, body, _, _, loss = _make_learner(skill, config)
+    loss.load_state_dict(state["loss"])
+    frame = _command_frame(skill, config)
+    output = Path(output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    atomic_save(_skill_body(norm, body, frame).state_dict(), output)
+    return int(state["progress"])
 
 
 def _load_ppo_state(path: Path, skill: LocomotionSkill) -> dict[str, Any]:
@@ -614,12 +651,24 @@ def main(argv: list[str] | None = None) -> None:
         help="steps between the training commands' redraws, drawn in [LOW, HIGH] (humanoid; default 100 200)",
     )
     parser.add_argument("--init-from", default=None, help="a PPO resume_state.pt whose learner starts this new run (a curriculum stage)")
+    parser.add_argument(
+        "--export-from",
+        default=None,
+        metavar="STATE",
+        help="train nothing: write the skill body of this resume_state.pt's current learner to --output (required)",
+    )
     add_output_argument(parser)
     parser.add_argument("--threads", type=int, default=1, help="torch threads (one is fastest on small CPUs)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     torch.set_num_threads(args.threads)
     skill = SKILLS[args.skill]
+    if args.export_from is not None:
+        if args.output is None:
+            parser.error("--export-from needs --output (where the body goes)")
+        steps = export_learner(args.export_from, args.output, skill=skill)
+        print(json.dumps({"exported": str(args.output), "steps": steps, "from": args.export_from}))
+        return
     overrides = {
         "total_steps": args.steps,
         "num_envs": args.num_envs,

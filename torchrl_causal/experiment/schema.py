@@ -567,10 +567,8 @@ def _check_expert(cfg: DictConfig) -> None:
     if cfg.env.expert is None:
         raise ConfigValueError(
             f"env {cfg.env.name!r} has no expert (env.expert is null), and every algorithm needs one "
-            "(demonstrations, or the expert row). HumanoidMaze's expert (HumanoidMazeExpert) needs its walking "
-            "skill's weights, which this library does not ship yet (issue 38; how they are trained: "
-            "results/humanoid_locomotion/README.md); with a skill body of your own, pass "
-            "'+env.expert={_target_: torchrl_causal.envs.HumanoidMazeExpert, weights: PATH}', or your own class taking the env."
+            "(demonstrations, or the expert row): name a class taking the env, e.g. "
+            "'env.expert={_target_: torchrl_causal.envs.HumanoidMazeExpert, weights: PATH}' for a humanoid skill body of your own."
         )
 
 
