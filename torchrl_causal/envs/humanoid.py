@@ -249,8 +249,9 @@ def load_humanoid_locomotion_network(path: str | pathlib.Path = HUMANOID_LOCOMOT
         path,
         humanoid_skill_network(command_frame=_stored_command_frame(path)),
         regenerate=(
-            "python -m torchrl_causal.envs.locomotion_ppo --skill humanoid, in curriculum stages (standing, walking "
-            "straight, steering; tens of millions of env steps over several sittings): results/humanoid_locomotion/README.md"
+            f"python -m torchrl_causal.envs.locomotion_ppo --skill humanoid --export-from "
+            f"results/humanoid_locomotion/ppo_legs2/resume_state.pt --output {path}  "
+            "# in a checkout; the training behind that state: results/humanoid_locomotion/README.md"
         ),
     )
 
