@@ -80,20 +80,20 @@ def falls_and_reach(maze: str, batch: int, seed: int, weights: str | None, clear
     reached = rollout["next", "success"].squeeze(-1).any(1)
     goal = torch.as_tensor(env.goal_xy, dtype=end.dtype)
     to_goal = (rollout["next", "P"][..., :2] - goal).norm(dim=-1)
+    closest = torch.where(within, to_goal, torch.inf).min(1).values
     for index in range(batch):
         fall = "-" if first_fall[index] < 0 else str(int(first_fall[index]))
         walked = float((end[index] - start[index]).norm())
         print(
             f"episode {index}: success {bool(reached[index])}, first fall {fall}, {walked:.1f} m from the start, "
             f"{float(to_goal[index, last[index]]):.1f} m from the goal at step {int(last[index]) + 1} "
-            f"(closest {float(to_goal[index, : last[index] + 1].min()):.1f} m)"
+            f"(closest {float(closest[index]):.1f} m)"
         )
     steps = sorted(int(last[index]) + 1 for index in range(batch) if reached[index])
-    upright_failures = (~reached & (first_fall < 0)).nonzero().flatten().tolist()
-    closest = sorted(round(float(to_goal[i, : last[i] + 1].min()), 1) for i in upright_failures)
+    upright_failures = ~reached & (first_fall < 0)
     print(
         f"{maze}: {int(reached.sum())} of {batch} reached the goal (at steps {steps}), {int((first_fall >= 0).sum())} fell; "
-        f"closest approach of the upright failures (m): {closest}"
+        f"closest approach of the upright failures (m): {sorted(round(float(d), 1) for d in closest[upright_failures])}"
     )
 
 

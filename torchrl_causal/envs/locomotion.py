@@ -308,17 +308,17 @@ def require_positive(config: Any, names: Iterable[str]) -> None:
             raise ValueError(f"{name} must be >= 1, got {getattr(config, name)}")
 
 
+def _as_json(value: Any) -> Any:
+    """``value`` as a JSON file reads it back (a tuple is a list there), so saved and live configs compare."""
+    return json.loads(json.dumps(value))
+
+
 def check_same_config(saved: dict[str, Any], config: Any, where: str | Path) -> None:
     """Refuses to continue a run made with another config (its learning settings, not its
     :data:`BOOKKEEPING`); ``config`` is a dataclass, and fields added since the run started
     keep their default."""
     defaults = asdict(type(config)())
-
-    # Compared as JSON reads them back (a saved tuple is a list there).
-    def plain(value: Any) -> Any:
-        return json.loads(json.dumps(value))
-
-    changed = sorted(k for k, v in asdict(config).items() if k not in BOOKKEEPING and plain(saved.get(k, defaults[k])) != plain(v))
+    changed = sorted(k for k, v in asdict(config).items() if k not in BOOKKEEPING and _as_json(saved.get(k, defaults[k])) != _as_json(v))
     if changed:
         raise ValueError(f"{where} was trained with another config (changed: {changed}); use a new --run-dir or the same settings")
 

@@ -32,7 +32,7 @@ import json
 import logging
 import math
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -159,7 +159,6 @@ class PPOLocomotionConfig:
             period = tuple(self.direction_period)
             if len(period) != 2 or not all(isinstance(n, int) for n in period) or not 1 <= period[0] <= period[1]:
                 raise ValueError(f"direction_period must be two steps 1 <= low <= high, got {self.direction_period!r}")
-            object.__setattr__(self, "direction_period", period)  # a JSON list read back compares as the tuple
         if self.command_spread is not None and not 0 <= self.command_spread <= math.pi:
             raise ValueError(f"command_spread must lie in [0, pi], got {self.command_spread} (--command-spread pi: uniform)")
         if self.widen_gate is not None:
@@ -173,6 +172,11 @@ class PPOLocomotionConfig:
         """The reward settings passed to the skill's env (those left at ``None`` keep the env's default)."""
         options = {"speed_weight": self.speed_weight, "command_spread": self.command_spread}
         return {name: value for name, value in options.items() if value is not None}
+
+    @property
+    def collector_options(self) -> dict[str, Any]:
+        """The training env's settings on top of :attr:`env_options` (the evaluation keeps the skill's task)."""
+        return {} if self.direction_period is None else {"direction_period": self.direction_period}
 
     @property
     def frames_per_batch(self) -> int:
@@ -344,8 +348,7 @@ def train_locomotion_ppo(
     if resume_from is not None and init_from is not None:
         raise ValueError("give resume_from (continue a run) or init_from (start a new run from its learner), not both")
     skill = SKILLS[skill] if isinstance(skill, str) else skill
-    collector_options = {} if config.direction_period is None else {"direction_period": config.direction_period}
-    unknown = sorted((set(config.env_options) | set(collector_options)) - set(skill.env_options))
+    unknown = sorted((set(config.env_options) | set(config.collector_options)) - set(skill.env_options))
     if unknown:
         raise ValueError(f"the {skill.name} skill's env takes no {unknown} (it takes {list(skill.env_options) or 'none'})")
     # Applied to the collector's env, so the learner (and its normaliser) only ever see the turned observations.
@@ -452,7 +455,7 @@ def train_locomotion_ppo(
     if remaining > 0:
         # A resumed run draws fresh episodes from a new seed (the simulations are not saved).
         counters["collect_seed"] += 1
-        env = skill.make_env(config.num_envs, counters["collect_seed"], **env_options(), **collector_options)
+        env = skill.make_env(config.num_envs, counters["collect_seed"], **env_options(), **config.collector_options)
         collector = Collector(
             env if frame is None else TransformedEnv(env, UnaryTransform(["observation"], ["observation"], fn=frame)),
             actor,
@@ -550,7 +553,8 @@ def export_learner(state_path: str | Path, output: str | Path, *, skill: str | L
     """
     skill = SKILLS[skill] if isinstance(skill, str) else skill
     state = _load_ppo_state(Path(state_path), skill)
-    config = replace(PPOLocomotionConfig(), **{k: v for k, v in state["config"].items() if k in asdict(PPOLocomotionConfig())})
+    names = {field.name for field in fields(PPOLocomotionConfig)}
+    config = PPOLocomotionConfig(**{k: v for k, v in state["config"].items() if k in names})
     norm, body, _, _, loss = _make_learner(skill, config)
     loss.load_state_dict(state["loss"])
     frame = _command_frame(skill, config)
