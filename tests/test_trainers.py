@@ -554,6 +554,38 @@ def test_the_demonstration_set_is_a_function_of_demos_seed_alone(tmp_path: Path)
     assert not torch.equal(first["action"][:shortest], other["action"][:shortest])
 
 
+def test_a_set_collected_by_another_expert_is_refused_not_reused(tmp_path: Path) -> None:
+    """The set's path names the env, horizon, strength, size and seed, not the expert: a run
+    whose expert acts otherwise (here its noise; a retrained skill's weights alike) must not
+    train on the old expert's demonstrations. It is refused in one line naming the field."""
+    from torchrl_causal.data.demonstrations import DatasetError
+    from torchrl_causal.experiment.builders import check_demonstrations, load_or_collect_demonstrations
+
+    collected = tiny_config(tmp_path, "rovermaze_u", "bc", True, "demos.episodes=2")
+    load_or_collect_demonstrations(collected)
+    check_demonstrations(collected)  # the same expert: accepted
+    other = tiny_config(tmp_path, "rovermaze_u", "bc", True, "demos.episodes=2", "+env.expert.noise_std=0.1")
+    assert other.demos.path == collected.demos.path
+    for load in (check_demonstrations, load_or_collect_demonstrations):
+        with pytest.raises(DatasetError, match=r"'policy_settings.noise_std' is 0.2, expected 0.1\. Delete .* and rerun") as error:
+            load(other)
+        assert "\n" not in str(error.value)
+
+
+def test_the_policy_record_tells_skill_weights_apart() -> None:
+    """Two maze experts of one class and settings differ in the record iff their skill's weights do."""
+    from torchrl_causal.data import policy_record
+    from torchrl_causal.envs import AntMazeEnv, AntMazeExpert
+
+    env = AntMazeEnv("medium", batch_size=1, seed=0)
+    shipped, copy, retrained = AntMazeExpert(env), AntMazeExpert(env), AntMazeExpert(env)
+    with torch.no_grad():
+        next(retrained.locomotion.parameters()).add_(1e-6)
+    assert policy_record(shipped) == policy_record(copy)
+    assert policy_record(retrained)["policy_settings"] == policy_record(shipped)["policy_settings"]
+    assert policy_record(retrained)["policy_weights"] != policy_record(shipped)["policy_weights"]
+
+
 def trainer_sees(cfg) -> int:
     """How many expert transitions the off-policy trainer of ``cfg`` loads into its expert buffer."""
     trainer = build_trainer(cfg)

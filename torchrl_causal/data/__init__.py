@@ -6,6 +6,7 @@ from torchrl_causal.data.demonstrations import (
     DatasetError,
     collect_demonstrations,
     load_demonstrations,
+    policy_record,
     read_metadata,
     successful_episodes,
 )
@@ -18,6 +19,7 @@ __all__ = [
     "export_minari",
     "load_demonstrations",
     "load_minari_demonstrations",
+    "policy_record",
     "read_metadata",
     "successful_episodes",
 ]

@@ -8,8 +8,9 @@ A dataset is a directory holding
   produce, ``"is_init"`` (bool ``[N, 1]``, True at each episode's first step) and
   ``"episode"`` (int64 ``[N]``);
 * ``metadata.json``: the format version, the env config (class, maze, horizon, strength,
-  regime...), the seed, the number of episodes and transitions, the expert's success rate
-  and mean episode length, a manifest (shape and dtype of every key) and a SHA-256
+  regime...), the seed, the policy that collected it (:func:`policy_record`: its class, its
+  settings and a digest of its weights), the number of episodes and transitions, the
+  expert's success rate and mean episode length, a manifest (shape and dtype of every key) and a SHA-256
   checksum over the data and the rest of the metadata.
 
 Collection writes into a hidden temporary directory next to ``path`` and renames it into
@@ -45,6 +46,7 @@ __all__ = [
     "env_config",
     "collect_demonstrations",
     "load_demonstrations",
+    "policy_record",
     "read_metadata",
     "successful_episodes",
 ]
@@ -78,6 +80,33 @@ def dataset_checksum(data: TensorDictBase, metadata: Mapping[str, Any]) -> str:
         digest.update(name.encode())
         digest.update(value.detach().cpu().contiguous().view(torch.uint8).numpy().tobytes())
     return digest.hexdigest()
+
+
+def policy_record(policy: Callable[[TensorDictBase], TensorDictBase]) -> dict[str, Any]:
+    """What a dataset records of the policy that collected it, and what a run compares before
+    it reuses a set: ``"policy"`` (its class), ``"policy_settings"`` (the public ``settings``
+    mapping the experts keep: planner clearance, action noise...; empty where a policy has
+    none) and ``"policy_weights"`` (a SHA-256 over its parameters and buffers by name, ``None``
+    for a policy that is not a :class:`torch.nn.Module`).
+
+    The weights matter as much as the class: a retrained skill shipped under the same expert
+    class walks another path, and its old demonstrations must not be reused silently.
+
+    Examples:
+        >>> from torchrl_causal.envs import RoverExpert, RoverMazeEnv
+        >>> record = policy_record(RoverExpert(RoverMazeEnv(maze="u"), noise_std=0.1, seed=0))
+        >>> record["policy"], record["policy_settings"]["noise_std"], record["policy_weights"] is not None
+        ('torchrl_causal.envs.experts.RoverExpert', 0.1, True)
+    """
+    weights = None
+    if isinstance(policy, torch.nn.Module):
+        digest = hashlib.sha256()
+        for name, value in sorted(policy.state_dict().items()):
+            digest.update(f"{name}:{value.dtype}:{tuple(value.shape)}".encode())
+            digest.update(value.detach().cpu().contiguous().view(torch.uint8).numpy().tobytes())
+        weights = digest.hexdigest()
+    settings = dict(getattr(policy, "settings", {}))
+    return {"policy": f"{type(policy).__module__}.{type(policy).__qualname__}", "policy_settings": settings, "policy_weights": weights}
 
 
 def env_config(env: EnvBase) -> dict[str, Any]:
@@ -186,7 +215,7 @@ def collect_demonstrations(
         "env": env_config(env),
         "regime": getattr(env, "regime", None),
         "seed": seed,
-        "policy": f"{type(policy).__module__}.{type(policy).__qualname__}",
+        **policy_record(policy),
         "episodes": episodes,
         "transitions": data.shape[0],
         "expert_success_rate": None if success is None else success.float().mean().item(),

@@ -64,7 +64,7 @@ def load_source(
     return load_minari_demonstrations(reference, expected=expected, verify_checksum=verify_checksum)
 
 
-def check_source(source: str | None, path: str | os.PathLike, expected: EnvBase) -> None:
+def check_source(source: str | None, path: str | os.PathLike, expected: Mapping[str, Any] | EnvBase) -> None:
     """Refuses demonstrations that a run could not train on, before the run starts: a
     Minari dataset always (it must exist), our format only where ``path`` exists (else the
     run collects it).

@@ -91,6 +91,16 @@ class RoverExpert(TensorDictModuleBase):
         self.turn_gain = turn_gain
         self.noise = _ActionNoise(noise_std, seed, env.device)
         self.planner = MazePlanner(env.layout, env.goal_cell, lookahead=lookahead, clearance=env.params.half_size + margin)
+        # What shapes its actions besides the env: demonstration sets record it and are refused
+        # for an expert with other settings (torchrl_causal.data.policy_record).
+        self.settings = {
+            "min_throttle": min_throttle,
+            "margin": margin,
+            "lookahead": lookahead,
+            "turn_gain": turn_gain,
+            "noise_std": noise_std,
+            "seed": seed,
+        }
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         position = tensordict.get("P")
@@ -130,6 +140,8 @@ class _PlannedSkillExpert(TensorDictModuleBase):
         self.locomotion = skill.to(env.device)
         self.action_dim = action_dim
         self.noise = _ActionNoise(noise_std, seed, env.device)
+        # Recorded by demonstration sets beside a digest of the skill's weights (policy_record).
+        self.settings = {"lookahead": lookahead, "clearance": clearance, "noise_std": noise_std, "seed": seed}
 
     def _skill_observation(self, tensordict: TensorDictBase, direction: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError

@@ -185,7 +185,9 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
     ``cfg.demos.successful_only`` only its episodes that reached the goal are returned.
 
     The set must have been recorded in this config's train-regime env (same maze,
-    horizon, strength): :func:`~torchrl_causal.data.sources.load_source` refuses others.
+    horizon, strength) by this config's expert (same class, settings and weights:
+    :func:`~torchrl_causal.data.policy_record`; a retrained skill makes new demonstrations):
+    :func:`~torchrl_causal.data.sources.load_source` refuses others.
     The set is a function of the config alone (``demos.seed`` seeds the env and the
     expert's noise), so runs started side by side that both collect it write the same set;
     collection is atomic and one copy wins. Collection leaves torch's random state as it
@@ -196,7 +198,7 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
     from torchrl_causal.data.sources import load_source, minari_reference
 
     path = Path(cfg.demos.path)
-    reference = make_env(cfg, "train", 1, cfg.demos.seed)
+    reference = _expected_demonstrations(cfg)
     if minari_reference(cfg.demos.source) is None and not path.exists():
         episodes = cfg.demos.episodes
         env = make_env(cfg, "train", min(episodes, 64), cfg.demos.seed)
@@ -233,6 +235,27 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
     return kept
 
 
+def _expected_demonstrations(cfg: DictConfig) -> dict[str, Any]:
+    """What the demonstrations of ``cfg`` must record: the train-regime env's config and, for
+    a set in our format (collected here, not a Minari dataset from elsewhere) when the env
+    names an expert, that expert's :func:`~torchrl_causal.data.policy_record`."""
+    from torchrl_causal.data import policy_record
+    from torchrl_causal.data.demonstrations import env_config
+    from torchrl_causal.data.sources import minari_reference
+
+    env = make_env(cfg, "train", 1, cfg.demos.seed)
+    try:
+        expected: dict[str, Any] = {"env": {k: v for k, v in env_config(env).items() if k != "batch_size"}}
+        if minari_reference(cfg.demos.source) is None and cfg.env.get("expert") is not None:
+            # An expert seeds its noise from the global generator: building one only to read its
+            # record must leave the run's draws as they were.
+            with torch.random.fork_rng():
+                expected |= policy_record(make_expert(cfg, env))
+        return expected
+    finally:
+        env.close()
+
+
 def check_demonstrations(cfg: DictConfig) -> None:
     """Refuses the demonstrations of ``cfg.demos`` before a run starts (see
     :func:`~torchrl_causal.data.sources.check_source`): a wrong env, a missing key,
@@ -240,9 +263,8 @@ def check_demonstrations(cfg: DictConfig) -> None:
     from torchrl_causal.data.demonstrations import DatasetError
     from torchrl_causal.data.sources import check_source, minari_reference
 
-    env = make_env(cfg, "train", 1, cfg.demos.seed)
     try:
-        check_source(cfg.demos.source, cfg.demos.path, env)
+        check_source(cfg.demos.source, cfg.demos.path, _expected_demonstrations(cfg))
     except DatasetError as error:
         if minari_reference(cfg.demos.source) is not None:
             raise
@@ -250,8 +272,6 @@ def check_demonstrations(cfg: DictConfig) -> None:
             f"{error}. Delete {cfg.demos.path} and rerun to collect the set again (demos.seed "
             f"{cfg.demos.seed}), or point demos.path at a good copy"
         ) from None
-    finally:
-        env.close()
 
 
 def expert_transitions(window: AdjustmentWindow, demonstrations: TensorDictBase) -> TensorDict:
