@@ -44,6 +44,7 @@ __all__ = [
     "check_manifest",
     "dataset_checksum",
     "env_config",
+    "env_expectation",
     "collect_demonstrations",
     "load_demonstrations",
     "policy_record",
@@ -78,8 +79,12 @@ def dataset_checksum(data: TensorDictBase, metadata: Mapping[str, Any]) -> str:
     digest.update(json.dumps({k: v for k, v in metadata.items() if k != "checksum"}, sort_keys=True).encode())
     for name, value in _leaves(data):
         digest.update(name.encode())
-        digest.update(value.detach().cpu().contiguous().view(torch.uint8).numpy().tobytes())
+        digest.update(_tensor_bytes(value))
     return digest.hexdigest()
+
+
+def _tensor_bytes(value: torch.Tensor) -> bytes:
+    return value.detach().cpu().contiguous().view(torch.uint8).numpy().tobytes()
 
 
 def policy_record(policy: Callable[[TensorDictBase], TensorDictBase]) -> dict[str, Any]:
@@ -103,10 +108,16 @@ def policy_record(policy: Callable[[TensorDictBase], TensorDictBase]) -> dict[st
         digest = hashlib.sha256()
         for name, value in sorted(policy.state_dict().items()):
             digest.update(f"{name}:{value.dtype}:{tuple(value.shape)}".encode())
-            digest.update(value.detach().cpu().contiguous().view(torch.uint8).numpy().tobytes())
+            digest.update(_tensor_bytes(value))
         weights = digest.hexdigest()
     settings = dict(getattr(policy, "settings", {}))
     return {"policy": f"{type(policy).__module__}.{type(policy).__qualname__}", "policy_settings": settings, "policy_weights": weights}
+
+
+def env_expectation(env: EnvBase) -> dict[str, Any]:
+    """The metadata a set collected in ``env`` must have (its config, batch size aside), as
+    :func:`load_demonstrations`'s ``expected`` reads it."""
+    return {"env": {k: v for k, v in env_config(env).items() if k != "batch_size"}}
 
 
 def env_config(env: EnvBase) -> dict[str, Any]:
@@ -341,7 +352,7 @@ def load_demonstrations(
     if verify_checksum and dataset_checksum(data, metadata) != metadata.get("checksum"):
         raise DatasetError(f"dataset {path} fails its checksum: its data or metadata were modified")
     if isinstance(expected, EnvBase):
-        expected = {"env": {k: v for k, v in env_config(expected).items() if k != "batch_size"}}
+        expected = env_expectation(expected)
     if expected is not None:
         check_expected(metadata, expected, "")
     return data

@@ -44,7 +44,7 @@ from torchrl_causal.data.demonstrations import (
     check_expected,
     check_manifest,
     dataset_checksum,
-    env_config,
+    env_expectation,
     load_demonstrations,
     read_metadata,
 )
@@ -370,7 +370,7 @@ def load_minari_demonstrations(
     directory = minari_dataset_dir(source)
     ours = _ours(read_minari_metadata(directory), directory)
     if isinstance(expected, EnvBase):
-        expected = {"env": {k: v for k, v in env_config(expected).items() if k != "batch_size"}}
+        expected = env_expectation(expected)
     if expected is not None:
         check_expected(ours, expected, "")
     try:

@@ -240,12 +240,12 @@ def _expected_demonstrations(cfg: DictConfig) -> dict[str, Any]:
     a set in our format (collected here, not a Minari dataset from elsewhere) when the env
     names an expert, that expert's :func:`~torchrl_causal.data.policy_record`."""
     from torchrl_causal.data import policy_record
-    from torchrl_causal.data.demonstrations import env_config
+    from torchrl_causal.data.demonstrations import env_expectation
     from torchrl_causal.data.sources import minari_reference
 
     env = make_env(cfg, "train", 1, cfg.demos.seed)
     try:
-        expected: dict[str, Any] = {"env": {k: v for k, v in env_config(env).items() if k != "batch_size"}}
+        expected = env_expectation(env)
         if minari_reference(cfg.demos.source) is None and cfg.env.get("expert") is not None:
             # An expert seeds its noise from the global generator: building one only to read its
             # record must leave the run's draws as they were.
