@@ -572,13 +572,18 @@ def test_a_set_collected_by_another_expert_is_refused_not_reused(tmp_path: Path)
         assert "\n" not in str(error.value)
 
 
-def test_the_policy_record_tells_skill_weights_apart() -> None:
-    """Two maze experts of one class and settings differ in the record iff their skill's weights do."""
+@pytest.mark.parametrize("maze_expert", ["ant", "humanoid"])
+def test_the_policy_record_tells_skill_weights_apart(maze_expert: str) -> None:
+    """Two maze experts of one class and settings differ in the record iff their skill's weights
+    do, for every shipped skill body (the humanoid's holds a 0-d buffer, ``command_frame``)."""
     from torchrl_causal.data import policy_record
-    from torchrl_causal.envs import AntMazeEnv, AntMazeExpert
+    from torchrl_causal.envs import AntMazeEnv, AntMazeExpert, HumanoidMazeEnv, HumanoidMazeExpert
 
-    env = AntMazeEnv("medium", batch_size=1, seed=0)
-    shipped, copy, retrained = AntMazeExpert(env), AntMazeExpert(env), AntMazeExpert(env)
+    env_class, expert_class = {"ant": (AntMazeEnv, AntMazeExpert), "humanoid": (HumanoidMazeEnv, HumanoidMazeExpert)}[maze_expert]
+    env = env_class("medium", batch_size=1, seed=0)
+    shipped, copy, retrained = expert_class(env), expert_class(env), expert_class(env)
+    if maze_expert == "humanoid":
+        assert any(value.dim() == 0 for value in shipped.state_dict().values())  # what the record must hash
     with torch.no_grad():
         next(retrained.locomotion.parameters()).add_(1e-6)
     assert policy_record(shipped) == policy_record(copy)

@@ -84,7 +84,10 @@ def dataset_checksum(data: TensorDictBase, metadata: Mapping[str, Any]) -> str:
 
 
 def _tensor_bytes(value: torch.Tensor) -> bytes:
-    return value.detach().cpu().contiguous().view(torch.uint8).numpy().tobytes()
+    # Flattened first: ``view(torch.uint8)`` refuses a 0-d tensor (the humanoid skill's
+    # ``command_frame`` buffer), and flattening leaves every other tensor's bytes as they were,
+    # so the digests already recorded in committed sets still match.
+    return value.detach().cpu().contiguous().reshape(-1).view(torch.uint8).numpy().tobytes()
 
 
 def policy_record(policy: Callable[[TensorDictBase], TensorDictBase]) -> dict[str, Any]:
