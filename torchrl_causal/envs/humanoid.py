@@ -34,6 +34,7 @@ __all__ = [
     "COMMAND_FRAME_VECTORS",
     "CommandFrame",
     "HUMANOID_COLUMNS",
+    "HUMANOID_LOCOMOTION_BODIES",
     "HUMANOID_LOCOMOTION_WEIGHTS",
     "HUMANOID_SKILL_OBSERVATION_DIM",
     "HUMANOID_SKILL_VARIABLES",
@@ -160,8 +161,18 @@ _COMMAND = HUMANOID_SKILL_OBSERVATION_DIM - 2
 #: centre-of-mass velocity), ``qvel``'s first two (the root's linear velocity, world frame for a
 #: free joint) and the command; the rest of the observation is egocentric or yaw-free.
 COMMAND_FRAME_VECTORS = (int(np.flatnonzero(_SKILL_COLUMNS == _COM)[0]), int(np.flatnonzero(_SKILL_COLUMNS == _NQ)[0]), _COMMAND)
-#: Where the package ships the trained skill's policy body (none yet: issue 38's long run makes it).
+#: Where the package ships the trained skill's policy body: the fast gait, (legs2)'s learner at
+#: 55.5M env steps, the only body that reaches HumanoidMaze-Large's goal within its horizon.
 HUMANOID_LOCOMOTION_WEIGHTS = pathlib.Path(__file__).parent / "assets" / "humanoid_locomotion.pt"
+#: The shipped skill bodies by name, each exported from a committed PPO state
+#: (``results/humanoid_locomotion/``). No single body is best on both mazes: the steady 36.5M
+#: learner walks HumanoidMaze-Medium at 86.8% (falls rarely) and never reaches Large's goal in
+#: 2000 steps; the fast 55.5M learner reaches Large (25.2%) and falls in ~45% of Medium's episodes
+#: (55.2%). So each maze's expert config names its body (``results/humanoidmaze_expert.md``).
+HUMANOID_LOCOMOTION_BODIES: dict[str, tuple[pathlib.Path, str]] = {
+    "fast": (HUMANOID_LOCOMOTION_WEIGHTS, "results/humanoid_locomotion/ppo_legs2_late/resume_state.pt"),
+    "steady": (HUMANOID_LOCOMOTION_WEIGHTS.with_name("humanoid_locomotion_steady.pt"), "results/humanoid_locomotion/ppo_legs2/resume_state.pt"),
+}
 
 
 class CommandFrame(torch.nn.Module):
@@ -241,16 +252,28 @@ def load_humanoid_locomotion_network(path: str | pathlib.Path = HUMANOID_LOCOMOT
     """The humanoid skill's 2 x 256 policy body (69 -> 2 x 21) with trained weights, in eval mode
     (behind a :class:`CommandFrame` when the weights were trained with one).
 
+    Args:
+        path: a weights file, or the name of a shipped body (:data:`HUMANOID_LOCOMOTION_BODIES`:
+            ``"fast"``, ``"steady"``).
+
     Raises:
         FileNotFoundError: naming the command that makes the weights.
+
+    Examples:
+        >>> body = load_humanoid_locomotion_network("steady")
+        >>> round(float(body[0].command_frame), 4)  # the angle its command is turned to (-pi/2)
+        -1.5708
     """
+    source = "results/humanoid_locomotion/ppo_legs2/resume_state.pt"
+    if str(path) in HUMANOID_LOCOMOTION_BODIES:
+        path, source = HUMANOID_LOCOMOTION_BODIES[str(path)]
     path = pathlib.Path(path)
     return load_skill_network(
         path,
         humanoid_skill_network(command_frame=_stored_command_frame(path)),
         regenerate=(
             f"python -m torchrl_causal.envs.locomotion_ppo --skill humanoid --export-from "
-            f"results/humanoid_locomotion/ppo_legs2/resume_state.pt --output {path}  "
+            f"{source} --output {path}  "
             "# in a checkout; the training behind that state: results/humanoid_locomotion/README.md"
         ),
     )
