@@ -14,21 +14,21 @@ from importlib import import_module
 _EXPORTS = {
     "AntLocomotionEnv": "ant",
     "AntMazeEnv": "antmaze",
-    "AntMazeExpert": "experts",
+    "AntMazeExpert": "torchrl_causal.experts.policies",
     "CompassSensor": "base",
     "ConfoundedEnv": "base",
     "GustConfoundedEnv": "base",
     "GustProcess": "base",
     "HumanoidMazeEnv": "humanoidmaze",
-    "HumanoidMazeExpert": "experts",
-    "MAZE_MAPS": "planner",
-    "MazeLayout": "planner",
-    "MazePlanner": "planner",
+    "HumanoidMazeExpert": "torchrl_causal.experts.policies",
+    "MAZE_MAPS": "torchrl_causal.experts.planner",
+    "MazeLayout": "torchrl_causal.experts.planner",
+    "MazePlanner": "torchrl_causal.experts.planner",
     "REGIMES": "base",
     "ROVER_TASKS": "rover_maze",
     "RouteChoiceEnv": "route_choice",
-    "RouteChoiceExpert": "experts",
-    "RoverExpert": "experts",
+    "RouteChoiceExpert": "torchrl_causal.experts.policies",
+    "RoverExpert": "torchrl_causal.experts.policies",
     "RoverMazeEnv": "rover_maze",
     "RoverParameters": "rover_maze",
     "rotate": "base",
@@ -43,7 +43,7 @@ def __getattr__(name: str) -> object:
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(import_module(f"{__name__}.{module}"), name)
+    value = getattr(import_module(module if "." in module else f"{__name__}.{module}"), name)
     globals()[name] = value
     return value
 

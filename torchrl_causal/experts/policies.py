@@ -14,7 +14,7 @@ from torchrl_causal.envs.antmaze import AntMazeEnv
 from torchrl_causal.envs.humanoid import HUMANOID_LOCOMOTION_WEIGHTS, load_humanoid_locomotion_network
 from torchrl_causal.envs.humanoidmaze import HumanoidMazeEnv
 from torchrl_causal.envs.mujoco_maze import MujocoMazeEnv
-from torchrl_causal.envs.planner import MazePlanner
+from torchrl_causal.experts.planner import MazePlanner
 from torchrl_causal.envs.rover_maze import RoverMazeEnv, RoverParameters
 
 __all__ = ["AntMazeExpert", "HumanoidMazeExpert", "RouteChoiceExpert", "RoverExpert"]

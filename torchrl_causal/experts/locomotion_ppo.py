@@ -47,7 +47,7 @@ from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 from torchrl.record.loggers.csv import CSVLogger
 
-from torchrl_causal.envs.locomotion import (
+from torchrl_causal.experts.locomotion import (
     BEST_BODY,
     EXPORT,
     SKILLS,
