@@ -8,8 +8,9 @@ import torch
 from torchrl.envs.utils import check_env_specs
 
 from torchrl_causal.envs import AntMazeEnv
-from torchrl_causal.envs.ant import AntLocomotionEnv, load_locomotion_network
+from torchrl_causal.envs.ant import AntLocomotionEnv
 from torchrl_causal.envs.base import GustProcess
+from torchrl_causal.experts.skills import load_locomotion_network
 
 CALM = GustProcess(probability=0.0)
 

@@ -278,7 +278,8 @@ def test_a_curriculum_without_room_to_widen_is_refused_in_one_line(change, messa
 
 
 def test_a_command_frame_run_learns_on_turned_observations_and_exports_a_body_for_the_envs_own(tmp_path) -> None:
-    from torchrl_causal.envs.humanoid import COMMAND_FRAME_VECTORS, CommandFrame, load_humanoid_locomotion_network
+    from torchrl_causal.envs.humanoid import COMMAND_FRAME_VECTORS
+    from torchrl_causal.experts.skills import CommandFrame, load_humanoid_locomotion_network
 
     plain = train_locomotion_ppo(tmp_path / "world", _config(FRAMES, hidden=256), progress_bar=False)
     assert "exported" not in plain

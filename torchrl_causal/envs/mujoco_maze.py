@@ -31,7 +31,7 @@ from tensordict.utils import NestedKey
 from torchrl.data import Bounded, TensorSpec, Unbounded
 
 from torchrl_causal.envs.base import GustConfoundedEnv, Regime
-from torchrl_causal.experts.planner import MAZE_MAPS, MazeLayout
+from torchrl_causal.envs.maze_layout import MAZE_MAPS, MazeLayout
 
 __all__ = ["MAZE_HEIGHT", "MAZE_SIZE_SCALING", "BatchedSimulation", "MazeSimulator", "MazeTask", "MujocoMazeEnv", "OffscreenRenderer"]
 

@@ -38,7 +38,7 @@ import torch
 from torchrl.data import Bounded, Unbounded
 
 from torchrl_causal.envs.base import GustConfoundedEnv
-from torchrl_causal.experts.planner import MazeLayout
+from torchrl_causal.envs.maze_layout import MazeLayout
 
 if TYPE_CHECKING:
     from torchrl_causal.graphs import TimeSliceTemplate

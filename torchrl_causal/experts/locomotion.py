@@ -53,15 +53,11 @@ from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 from torchrl.objectives import SACLoss, SoftUpdate
 from torchrl.record.loggers.csv import CSVLogger
 
-from torchrl_causal.envs.ant import LOCOMOTION_OBSERVATION_DIM, LOCOMOTION_WEIGHTS, AntLocomotionEnv
-from torchrl_causal.envs.humanoid import (
-    HUMANOID_LOCOMOTION_WEIGHTS,
-    HUMANOID_SKILL_OBSERVATION_DIM,
-    CommandFrame,
-    HumanoidLocomotionEnv,
-)
-from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv, make_skill_network
+from torchrl_causal.envs.ant import LOCOMOTION_OBSERVATION_DIM, AntLocomotionEnv
+from torchrl_causal.envs.humanoid import HUMANOID_SKILL_OBSERVATION_DIM, HumanoidLocomotionEnv
+from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv
 from torchrl_causal.experiment.run_directory import atomic_save, load_checkpoint
+from torchrl_causal.experts.skills import HUMANOID_LOCOMOTION_WEIGHTS, LOCOMOTION_WEIGHTS, CommandFrame, make_skill_network
 
 __all__ = [
     "BEST_BODY",

@@ -268,7 +268,7 @@ def fold_observation_normalisation(norm: RunningNormalisation, body: nn.Module) 
     ``folded(x) == body(norm(x))`` (``W' = W / s``, ``b' = b - W' mean``, ``s = sqrt(var + eps)``).
 
     Examples:
-        >>> from torchrl_causal.envs.open_ground import make_skill_network
+        >>> from torchrl_causal.experts.skills import make_skill_network
         >>> norm, body = RunningNormalisation(4), make_skill_network(4, 2, hidden=8)
         >>> norm.update(torch.randn(100, 4) * 3 + 1)
         >>> x = torch.randn(5, 4)
@@ -301,7 +301,7 @@ def make_ppo_actor(body: nn.Module, norm: RunningNormalisation, init_scale: floa
 
     Examples:
         >>> from tensordict import TensorDict
-        >>> from torchrl_causal.envs.open_ground import make_skill_network
+        >>> from torchrl_causal.experts.skills import make_skill_network
         >>> actor = make_ppo_actor(make_skill_network(6, 3, hidden=8), RunningNormalisation(6))
         >>> out = actor(TensorDict(observation=torch.zeros(2, 6), batch_size=[2]))
         >>> out["action"].shape, out["action_log_prob"].shape

@@ -9,12 +9,17 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-from torchrl_causal.envs.ant import LOCOMOTION_WEIGHTS, load_locomotion_network, locomotion_observation
+from torchrl_causal.envs.ant import locomotion_observation
 from torchrl_causal.envs.antmaze import AntMazeEnv
-from torchrl_causal.envs.humanoid import HUMANOID_LOCOMOTION_WEIGHTS, load_humanoid_locomotion_network
 from torchrl_causal.envs.humanoidmaze import HumanoidMazeEnv
 from torchrl_causal.envs.mujoco_maze import MujocoMazeEnv
 from torchrl_causal.experts.planner import MazePlanner
+from torchrl_causal.experts.skills import (
+    HUMANOID_LOCOMOTION_WEIGHTS,
+    LOCOMOTION_WEIGHTS,
+    load_humanoid_locomotion_network,
+    load_locomotion_network,
+)
 from torchrl_causal.envs.rover_maze import RoverMazeEnv, RoverParameters
 
 __all__ = ["AntMazeExpert", "HumanoidMazeExpert", "RouteChoiceExpert", "RoverExpert"]
