@@ -7,7 +7,9 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from torchrl_causal.envs import AntMazeEnv, AntMazeExpert, RoverMazeEnv
+from torchrl_causal.envs import AntMazeEnv, RoverMazeEnv
+
+from torchrl_causal.experts import AntMazeExpert
 from torchrl_causal.evaluation.rendering import record_filmstrip, save_filmstrips
 
 SIZE = 48

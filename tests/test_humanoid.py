@@ -268,7 +268,7 @@ def test_the_shipped_skill_walks_three_metres_along_each_of_four_commands_and_ra
 
 @pytest.mark.parametrize("command_frame", [None, -math.pi / 2])
 def test_maze_expert_steers_the_skill_towards_the_planner_waypoint_and_never_reads_w(tmp_path, command_frame):
-    from torchrl_causal.envs import HumanoidMazeExpert, MazePlanner
+    from torchrl_causal.experts import HumanoidMazeExpert, MazePlanner
     from torchrl_causal.experts.skills import humanoid_skill_network
 
     torch.manual_seed(0)
@@ -293,7 +293,7 @@ def test_maze_expert_steers_the_skill_towards_the_planner_waypoint_and_never_rea
 
 
 def test_maze_expert_without_trained_weights_names_the_command(tmp_path):
-    from torchrl_causal.envs import HumanoidMazeExpert
+    from torchrl_causal.experts import HumanoidMazeExpert
 
     with pytest.raises(FileNotFoundError, match="--skill humanoid"):
         HumanoidMazeExpert(HumanoidMazeEnv("medium", batch_size=1, seed=0), weights=tmp_path / "missing.pt")

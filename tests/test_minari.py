@@ -23,7 +23,8 @@ from torchrl_causal.data import (  # noqa: E402
     read_metadata,
 )
 from torchrl_causal.data.minari_format import from_minari_replay, read_minari_metadata  # noqa: E402
-from torchrl_causal.envs import RouteChoiceEnv, RouteChoiceExpert, RoverExpert, RoverMazeEnv  # noqa: E402
+from torchrl_causal.envs import RouteChoiceEnv, RoverMazeEnv  # noqa: E402
+from torchrl_causal.experts import RouteChoiceExpert, RoverExpert  # noqa: E402
 from torchrl_causal.transforms import CausalWindowTransform  # noqa: E402
 
 EPISODES = 3

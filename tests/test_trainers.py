@@ -577,7 +577,8 @@ def test_the_policy_record_tells_skill_weights_apart(maze_expert: str) -> None:
     """Two maze experts of one class and settings differ in the record iff their skill's weights
     do, for every shipped skill body (the humanoid's holds a 0-d buffer, ``command_frame``)."""
     from torchrl_causal.data import policy_record
-    from torchrl_causal.envs import AntMazeEnv, AntMazeExpert, HumanoidMazeEnv, HumanoidMazeExpert
+    from torchrl_causal.envs import AntMazeEnv, HumanoidMazeEnv
+    from torchrl_causal.experts import AntMazeExpert, HumanoidMazeExpert
 
     env_class, expert_class = {"ant": (AntMazeEnv, AntMazeExpert), "humanoid": (HumanoidMazeEnv, HumanoidMazeExpert)}[maze_expert]
     env = env_class("medium", batch_size=1, seed=0)

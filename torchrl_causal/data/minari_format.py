@@ -179,7 +179,8 @@ def export_minari(dataset: str | os.PathLike, dataset_id: str, *, root: str | os
     Examples:
         >>> import tempfile
         >>> from torchrl_causal.data import collect_demonstrations
-        >>> from torchrl_causal.envs import RoverExpert, RoverMazeEnv
+        >>> from torchrl_causal.envs import RoverMazeEnv
+        >>> from torchrl_causal.experts import RoverExpert
         >>> env = RoverMazeEnv(maze="u", batch_size=(2,))
         >>> folder = Path(tempfile.mkdtemp())
         >>> ours = collect_demonstrations(env, RoverExpert(env), 2, folder / "ours", seed=0, progress=False)

@@ -68,7 +68,7 @@ class MazeTask:
 
     @property
     def layout(self) -> MazeLayout:
-        """The layout at the MuJoCo mazes' scale, for :class:`~torchrl_causal.envs.MazePlanner`."""
+        """The layout at the MuJoCo mazes' scale, for :class:`~torchrl_causal.experts.MazePlanner`."""
         return MazeLayout(self.maze_map, cell_size=MAZE_SIZE_SCALING)
 
 

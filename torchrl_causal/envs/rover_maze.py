@@ -23,7 +23,7 @@ reset says where the rover faces.
 
 Tasks (``(row, col)`` cells of the gymnasium-robotics maps, cell size 1, start position
 jittered by up to 0.1 in each axis): ``u``: (1, 1) → (3, 1); ``medium``: (1, 1) → (6, 6);
-``large``: (7, 1) → (7, 10). With the default speeds :class:`~torchrl_causal.envs.RoverExpert`
+``large``: (7, 1) → (7, 10). With the default speeds :class:`~torchrl_causal.experts.RoverExpert`
 needs about 310 steps on medium and 640 on large (see ``results/rover_speed.md``).
 """
 

@@ -132,7 +132,8 @@ def record_filmstrip(
         every: a candidate frame is rendered every this many steps (and at the end).
 
     Examples:
-        >>> from torchrl_causal.envs import AntMazeEnv, AntMazeExpert
+        >>> from torchrl_causal.envs import AntMazeEnv
+        >>> from torchrl_causal.experts import AntMazeExpert
         >>> env = AntMazeEnv(maze="medium", regime="deploy", batch_size=[1], seed=0)
         >>> strip = record_filmstrip(env, AntMazeExpert(env), max_steps=30, frames=3, every=10, width=32, height=32)
         >>> strip.steps, strip.frames[0].shape, strip.length

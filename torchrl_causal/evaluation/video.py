@@ -113,7 +113,8 @@ def record_video(
 
     Examples:
         >>> import tempfile
-        >>> from torchrl_causal.envs import AntMazeEnv, AntMazeExpert
+        >>> from torchrl_causal.envs import AntMazeEnv
+        >>> from torchrl_causal.experts import AntMazeExpert
         >>> env = AntMazeEnv(maze="medium", regime="deploy", batch_size=[1], seed=0)
         >>> video = record_video(env, AntMazeExpert(env), Path(tempfile.mkdtemp()) / "ant.gif", max_steps=8,
         ...                      every=4, width=16, height=16)

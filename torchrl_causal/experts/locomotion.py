@@ -25,9 +25,9 @@ The best evaluation's policy body is exported to ``--output`` (by default ``<run
 a run never overwrites the weights the package ships unless that path is named, as here, where
 the ant's shipped weights are regenerated)::
 
-    python -m torchrl_causal.envs.locomotion --skill ant --run-dir runs/ant_locomotion \
+    python -m torchrl_causal.experts.locomotion --skill ant --run-dir runs/ant_locomotion \
         --output torchrl_causal/envs/assets/ant_locomotion.pt
-    python -m torchrl_causal.envs.locomotion --skill humanoid --run-dir runs/humanoid_locomotion
+    python -m torchrl_causal.experts.locomotion --skill humanoid --run-dir runs/humanoid_locomotion
 """
 
 from __future__ import annotations
@@ -132,7 +132,7 @@ class LocomotionSkill:
         defaults: the :class:`LocomotionConfig` fields this skill changes.
         env_options: the names ``make_env`` accepts as ``options``.
         command_frame: ``angle -> module`` turning this skill's observations so the command points
-            at ``angle`` (:class:`~torchrl_causal.envs.humanoid.CommandFrame`), or ``None`` where
+            at ``angle`` (:class:`~torchrl_causal.experts.skills.CommandFrame`), or ``None`` where
             the skill has none (the PPO trainer's ``command_frame`` option).
     """
 
@@ -150,7 +150,7 @@ class LocomotionSkill:
         return replace(LocomotionConfig(), **{**self.defaults, **{k: v for k, v in overrides.items() if v is not None}})
 
     def network(self, hidden: int = 256) -> nn.Module:
-        """A fresh policy body (:func:`~torchrl_causal.envs.open_ground.make_skill_network`)."""
+        """A fresh policy body (:func:`~torchrl_causal.experts.skills.make_skill_network`)."""
         return make_skill_network(self.observation_dim, self.action_dim, hidden)
 
 
@@ -183,7 +183,7 @@ def make_locomotion_actor(body: nn.Module | None = None) -> ProbabilisticActor:
     """The tanh-Gaussian SAC actor around a skill's policy body (the ant's by default).
 
     Its deterministic action is ``tanh`` of the body's first half of outputs, which is what
-    :class:`~torchrl_causal.envs.AntMazeExpert` computes from the exported body.
+    :class:`~torchrl_causal.experts.AntMazeExpert` computes from the exported body.
 
     Examples:
         >>> from tensordict import TensorDict

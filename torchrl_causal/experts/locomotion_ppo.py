@@ -1,19 +1,19 @@
 """PPO for the walking skills: many batched simulations, on-policy, weights-only resume.
 
-Issue 38's fallback for the humanoid's skill. SAC (:mod:`torchrl_causal.envs.locomotion`) is
+Issue 38's fallback for the humanoid's skill. SAC (:mod:`torchrl_causal.experts.locomotion`) is
 bound by its updates on one CPU core (~75 env steps/s at 0.5 updates per step, 2 x 256), so its
 3M-step budget is ~11 core-hours; PPO's cost is the simulation's (a 4096-step batch is ~1.5 s of
 MuJoCo and ~0.1 s of updates at 2 x 256), tens of times more env steps per core-hour, which is
 what a standing-start humanoid needs (OGBench's SAC skill used 40M). On-policy also makes the
 resume across machines exact: the learner's weights, normaliser and optimiser are the whole state.
 
-The policy is the skill's body (:func:`~torchrl_causal.envs.open_ground.make_skill_network`) on
+The policy is the skill's body (:func:`~torchrl_causal.experts.skills.make_skill_network`) on
 running-normalised observations, a Gaussian around ``tanh`` of its first half of outputs with the
 second half's softplus as the scale; the env clips the sampled action to ``[-1, 1]``. Its
 deterministic action is therefore ``tanh`` of the body's first half, as the SAC skill's, and the
 exported body has the normaliser folded into its first layer
 (:func:`fold_observation_normalisation`): the shipped weights load into the same network as
-SAC's, and :class:`~torchrl_causal.envs.HumanoidMazeExpert` uses them unchanged.
+SAC's, and :class:`~torchrl_causal.experts.HumanoidMazeExpert` uses them unchanged.
 
 TorchRL parts: :class:`~torchrl.collectors.Collector` over the batched env,
 :class:`~torchrl.objectives.value.GAE`, :class:`~torchrl.objectives.ClipPPOLoss`. Rewards are
@@ -21,7 +21,7 @@ scaled by ``reward_scale`` for the critic (the stand reward is up to 2.5 per ste
 ``checkpoint_minutes`` and every evaluation ``<run_dir>/resume_state.pt`` is written (a few MB);
 the same command resumes from it, on this machine or (``--resume-from``) another::
 
-    python -m torchrl_causal.envs.locomotion_ppo --skill humanoid --run-dir runs/humanoid_ppo
+    python -m torchrl_causal.experts.locomotion_ppo --skill humanoid --run-dir runs/humanoid_ppo
 """
 
 from __future__ import annotations
@@ -92,13 +92,13 @@ class PPOLocomotionConfig:
     ``speed_weight`` (``None``: the env's default) weighs the speed term of the skill env's reward;
     ``command_spread`` (``None``: uniform commands) bounds the angle between a command and the heading.
     ``widen_gate`` (``None``: the spread stays put) makes one run its own curriculum: at each
-    evaluation, on the current commands, whose :func:`~torchrl_causal.envs.locomotion.upright_speed`
+    evaluation, on the current commands, whose :func:`~torchrl_causal.experts.locomotion.upright_speed`
     reaches the gate, the spread widens by ``widen_step`` for the rest of the run, up to pi (uniform,
     the skill's task). Each spread selects its own best body (a wider one is a harder task, so
     scores across spreads do not compare): the export is the best at the widest spread reached.
     ``command_frame`` (``None``: the world frame) makes the learner read observations turned so
     that the command points at that angle (the skill's
-    :class:`~torchrl_causal.envs.humanoid.CommandFrame`, applied to the collector's env; the
+    :class:`~torchrl_causal.experts.skills.CommandFrame`, applied to the collector's env; the
     exported body starts with it, so it reads the env's own observations).
     ``direction_period`` (``None``: the env's, 100-200 steps) is the inclusive range of steps between
     the training env's command redraws; the evaluation keeps the skill's task, so a run that walks
@@ -342,7 +342,7 @@ def train_locomotion_ppo(
     refused (the changed fields are named). ``init_from`` instead starts a new run, under this
     config, from another PPO run's learner (weights, normaliser, Adam and its env-step count): a
     curriculum stage, e.g. a standing policy fine-tuned on a reward that pays walking more. The
-    best evaluation (:func:`~torchrl_causal.envs.locomotion.upright_speed`) keeps its folded body in ``<run_dir>/best_body.pt``
+    best evaluation (:func:`~torchrl_causal.experts.locomotion.upright_speed`) keeps its folded body in ``<run_dir>/best_body.pt``
     (a run started ``init_from`` selects among its own evaluations). Returns the final record.
     """
     if resume_from is not None and init_from is not None:

@@ -167,8 +167,8 @@ class AntMazeExpert(_PlannedSkillExpert):
     As OGBench built its maze experts: :class:`MazePlanner` (BFS over the maze's cells,
     the furthest path cell in clear line of sight within ``lookahead`` cells) gives a
     waypoint, the unit vector from the torso to it is the commanded direction, and the
-    locomotion policy trained by ``python -m torchrl_causal.envs.locomotion``
-    (:data:`~torchrl_causal.envs.ant.LOCOMOTION_WEIGHTS`, shipped with the package) turns
+    locomotion policy trained by ``python -m torchrl_causal.experts.locomotion``
+    (:data:`~torchrl_causal.experts.skills.LOCOMOTION_WEIGHTS`, shipped with the package) turns
     the ant's proprioception and that direction into torques (its deterministic action,
     ``tanh`` of the Gaussian mean). It reads the true orientation ``("latent", "O")``,
     never the compass ``W``, so its behaviour is the same in both regimes.
@@ -217,8 +217,8 @@ class AntMazeExpert(_PlannedSkillExpert):
 class HumanoidMazeExpert(_PlannedSkillExpert):
     """The Confounded HumanoidMaze expert: planner waypoints steering the humanoid's walking skill.
 
-    The ant's expert with the humanoid's skill (``python -m torchrl_causal.envs.locomotion
-    --skill humanoid``, exported to :data:`~torchrl_causal.envs.humanoid.HUMANOID_LOCOMOTION_WEIGHTS`):
+    The ant's expert with the humanoid's skill (``python -m torchrl_causal.experts.locomotion
+    --skill humanoid``, exported to :data:`~torchrl_causal.experts.skills.HUMANOID_LOCOMOTION_WEIGHTS`):
     the skill reads the expert's variables A, H, E, V, the centre-of-mass velocity
     ``("latent", "C")`` and J, with the commanded direction (OGBench's skill observation), never
     the vibration sensor ``W``. The skill's weights ship with the package
@@ -235,7 +235,7 @@ class HumanoidMazeExpert(_PlannedSkillExpert):
         env: the :class:`~torchrl_causal.envs.HumanoidMazeEnv` to solve.
         lookahead / clearance / noise_std / seed: as :class:`AntMazeExpert`'s.
         weights: path of the skill's state dict, or a shipped body's name
-            (:data:`~torchrl_causal.envs.humanoid.HUMANOID_LOCOMOTION_BODIES`: ``"fast"``, the
+            (:data:`~torchrl_causal.experts.skills.HUMANOID_LOCOMOTION_BODIES`: ``"fast"``, the
             default file, or ``"steady"``); each maze's config names its best body.
     """
 
