@@ -35,7 +35,7 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.envs import EnvBase
 
-from torchrl_causal.errors import TorchRLCausalError
+from torchrl_causal.errors import ExistingFileError, InvalidValueError, TorchRLCausalError
 from torchrl_causal.progress import progress as progress_reporter
 
 __all__ = [
@@ -149,7 +149,7 @@ def _rollout_episodes(
     against the expert's 87%).
     """
     if env.batch_size == ():
-        raise ValueError("collect_demonstrations needs a batched env (batch_size (B,) or larger)")
+        raise InvalidValueError("collect_demonstrations needs a batched env (batch_size (B,) or larger)")
     n_envs = env.batch_size.numel()
     steps: list[TensorDictBase] = []
     finished: list[tuple[int, int, int]] = []  # (end step, env index, start step)
@@ -219,10 +219,10 @@ def collect_demonstrations(
         True
     """
     if not isinstance(episodes, int) or episodes < 1:
-        raise ValueError(f"episodes must be a positive int, got {episodes!r}")
+        raise InvalidValueError(f"episodes must be a positive int, got {episodes!r}")
     path = Path(path)
     if path.exists() and not overwrite:
-        raise FileExistsError(f"a dataset already exists at {path} (pass overwrite=True to replace it)")
+        raise ExistingFileError(f"a dataset already exists at {path} (pass overwrite=True to replace it)")
     if seed is not None:
         env.set_seed(seed)
     data = _flatten(_rollout_episodes(env, policy, episodes, progress))

@@ -18,7 +18,6 @@ from __future__ import annotations
 import importlib.util
 import math
 import pathlib
-
 from collections.abc import Sequence
 
 import mujoco
@@ -27,8 +26,9 @@ import torch
 from ogbench.online_locomotion.humanoid import tolerance
 
 from torchrl_causal.envs.base import GustProcess
-from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv
 from torchrl_causal.envs.mujoco_maze import BatchedSimulation
+from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv
+from torchrl_causal.errors import InvalidValueError, MissingDependencyError
 
 __all__ = [
     "COMMAND_FRAME_VECTORS",
@@ -51,7 +51,7 @@ __all__ = [
 def _ogbench_asset(name: str) -> pathlib.Path:
     spec = importlib.util.find_spec("ogbench")  # locates the package without importing it
     if spec is None or not spec.submodule_search_locations:
-        raise ModuleNotFoundError("HumanoidMaze uses OGBench's humanoid model: `pip install ogbench` (MIT, no jax)")
+        raise MissingDependencyError("HumanoidMaze uses OGBench's humanoid model: `pip install ogbench` (MIT, no jax)")
     return pathlib.Path(next(iter(spec.submodule_search_locations))) / "locomaze" / "assets" / name
 
 
@@ -209,7 +209,9 @@ class HumanoidLocomotionEnv(DirectionalLocomotionEnv):
     ) -> None:
         count = self.batch_count(batch_size)
         if not speed_cap > 0 or not fall_height > 0 or not speed_weight >= 0:
-            raise ValueError(f"speed_cap and fall_height must be > 0 and speed_weight >= 0, got {speed_cap}, {fall_height}, {speed_weight}")
+            raise InvalidValueError(
+                f"speed_cap and fall_height must be > 0 and speed_weight >= 0, got {speed_cap}, {fall_height}, {speed_weight}"
+            )
         self.speed_cap, self.speed_weight, self.fall_height = float(speed_cap), float(speed_weight), float(fall_height)
         model = mujoco.MjModel.from_xml_path(str(HUMANOID_XML))
         self._readout = HumanoidReadout(model)

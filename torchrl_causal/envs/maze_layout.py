@@ -15,6 +15,8 @@ from collections.abc import Sequence
 import torch
 from gymnasium_robotics.envs.maze import maps
 
+from torchrl_causal.errors import InvalidValueError
+
 __all__ = ["MAZE_MAPS", "MazeLayout"]
 
 
@@ -44,12 +46,12 @@ class MazeLayout:
     def __init__(self, maze_map: Sequence[Sequence[int | str]], cell_size: float = 1.0) -> None:
         rows = [list(row) for row in maze_map]
         if not rows or any(len(row) != len(rows[0]) for row in rows):
-            raise ValueError("maze_map must be a non-empty rectangular list of rows")
+            raise InvalidValueError("maze_map must be a non-empty rectangular list of rows")
         walls = torch.tensor([[cell == 1 for cell in row] for row in rows], dtype=torch.bool)
         if not (walls[0].all() and walls[-1].all() and walls[:, 0].all() and walls[:, -1].all()):
-            raise ValueError("maze_map must be enclosed by walls (1) on every border cell")
+            raise InvalidValueError("maze_map must be enclosed by walls (1) on every border cell")
         if cell_size <= 0:
-            raise ValueError(f"cell_size must be positive, got {cell_size}")
+            raise InvalidValueError(f"cell_size must be positive, got {cell_size}")
         self.walls = walls
         self.cell_size = float(cell_size)
         self._walls_flat = walls.flatten()
@@ -58,7 +60,7 @@ class MazeLayout:
     def from_name(cls, name: str, cell_size: float = 1.0) -> MazeLayout:
         """The gymnasium-robotics map ``"u"``, ``"medium"`` or ``"large"``."""
         if name not in MAZE_MAPS:
-            raise ValueError(f"unknown maze {name!r}; expected one of {sorted(MAZE_MAPS)}")
+            raise InvalidValueError(f"unknown maze {name!r}; expected one of {sorted(MAZE_MAPS)}")
         return cls(MAZE_MAPS[name], cell_size)
 
     @property

@@ -25,6 +25,7 @@ from torchrl.envs import EnvBase
 
 from torchrl_causal.envs.base import GustProcess
 from torchrl_causal.envs.mujoco_maze import BatchedSimulation
+from torchrl_causal.errors import InvalidValueError
 
 __all__ = ["DirectionalLocomotionEnv", "root_heading"]
 
@@ -79,11 +80,11 @@ class DirectionalLocomotionEnv(EnvBase):
     ) -> None:
         n = simulation.num_envs
         if not 0 <= command_spread <= math.pi:
-            raise ValueError(f"command_spread must lie in [0, pi], got {command_spread}")
+            raise InvalidValueError(f"command_spread must lie in [0, pi], got {command_spread}")
         self.command_spread = float(command_spread)
         low, high = (direction_period, direction_period) if isinstance(direction_period, int) else direction_period
         if horizon < 1 or not 1 <= low <= high:
-            raise ValueError(f"need horizon >= 1 and 1 <= direction_period, got {horizon}, {direction_period!r}")
+            raise InvalidValueError(f"need horizon >= 1 and 1 <= direction_period, got {horizon}, {direction_period!r}")
         super().__init__(batch_size=torch.Size([n]), device="cpu")
         self.simulation = simulation
         self.horizon, self.direction_period = horizon, direction_period
@@ -112,7 +113,7 @@ class DirectionalLocomotionEnv(EnvBase):
         """The number of simulations of a one-dimensional ``batch_size``; anything else is refused."""
         shape = (batch_size,) if isinstance(batch_size, int) else tuple(batch_size)
         if len(shape) != 1 or shape[0] < 1:
-            raise ValueError(f"batch_size must be one positive dimension, got {batch_size!r}")
+            raise InvalidValueError(f"batch_size must be one positive dimension, got {batch_size!r}")
         return shape[0]
 
     # -- subclass hooks ------------------------------------------------------------------

@@ -46,7 +46,7 @@ import torch
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from torchrl_causal.algorithms import Row
-from torchrl_causal.errors import TorchRLCausalError
+from torchrl_causal.errors import InvalidValueError, MissingFileError, TorchRLCausalError
 
 __all__ = [
     "CONFIG_FILE",
@@ -205,7 +205,7 @@ def run_label(algorithm: str, causal: bool, window_matched: bool = False, drop: 
         ('sqil_wm', 'c_bc_no-X')
     """
     if causal and window_matched and algorithm != "expert":
-        raise ValueError("window.window_matched=true is a non-causal baseline: use it with causal=false")
+        raise InvalidValueError("window.window_matched=true is a non-causal baseline: use it with causal=false")
     return Row(algorithm, causal, window_matched, tuple(drop)).name
 
 
@@ -246,7 +246,7 @@ def load_checkpoint(path: Path, map_location: str | torch.device = "cpu") -> dic
     names the file. A checkpoint written on a GPU loads on a machine without one; a missing file
     is refused as missing (``FileNotFoundError``), not as corrupted."""
     if not Path(path).is_file():
-        raise FileNotFoundError(f"no checkpoint at {path}")
+        raise MissingFileError(f"no checkpoint at {path}")
     try:
         state = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as err:  # pickle, zip and unpickler errors all mean the same here
@@ -401,7 +401,7 @@ class RunDirectory:
             RunFileError: ``config.yaml`` does not parse.
         """
         if not self.config_file.is_file():
-            raise FileNotFoundError(f"{self.path} is not a run directory: {CONFIG_FILE} is missing")
+            raise MissingFileError(f"{self.path} is not a run directory: {CONFIG_FILE} is missing")
         try:
             config = OmegaConf.load(self.config_file)
         except Exception as error:  # YAML scanner and parser errors, OmegaConf's own
@@ -602,9 +602,9 @@ def copy_folders(root: str | Path, out: str | Path) -> tuple[Path, Path]:
     missing (``FileNotFoundError``) or one contains the other, equal folders included (``ValueError``)."""
     root, out = Path(root).resolve(), Path(out).resolve()
     if not root.exists():
-        raise FileNotFoundError(f"runs folder {root} does not exist")
+        raise MissingFileError(f"runs folder {root} does not exist")
     if out.is_relative_to(root) or root.is_relative_to(out):
-        raise ValueError(f"copy folder {out} and runs folder {root} must not contain one another")
+        raise InvalidValueError(f"copy folder {out} and runs folder {root} must not contain one another")
     return root, out
 
 

@@ -56,6 +56,7 @@ from torchrl.record.loggers.csv import CSVLogger
 from torchrl_causal.envs.ant import LOCOMOTION_OBSERVATION_DIM, AntLocomotionEnv
 from torchrl_causal.envs.humanoid import HUMANOID_SKILL_OBSERVATION_DIM, HumanoidLocomotionEnv
 from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv
+from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.experiment.run_directory import atomic_save, load_checkpoint
 from torchrl_causal.experts.skills import HUMANOID_LOCOMOTION_WEIGHTS, LOCOMOTION_WEIGHTS, CommandFrame, make_skill_network
 
@@ -114,9 +115,9 @@ class LocomotionConfig:
         require_positive(self, ("total_steps", "buffer_size", "num_envs", "frames_per_batch", "batch_size", "hidden"))
         require_positive(self, ("eval_every", "eval_envs", "eval_steps"))
         if self.frames_per_batch % self.num_envs:
-            raise ValueError(f"frames_per_batch ({self.frames_per_batch}) must be a multiple of num_envs ({self.num_envs})")
+            raise InvalidValueError(f"frames_per_batch ({self.frames_per_batch}) must be a multiple of num_envs ({self.num_envs})")
         if not 0 < self.tau <= 1 or not 0 < self.gamma < 1:
-            raise ValueError(f"need 0 < tau <= 1 and 0 < gamma < 1, got tau={self.tau}, gamma={self.gamma}")
+            raise InvalidValueError(f"need 0 < tau <= 1 and 0 < gamma < 1, got tau={self.tau}, gamma={self.gamma}")
 
 
 @dataclass(frozen=True)
@@ -301,7 +302,7 @@ def require_positive(config: Any, names: Iterable[str]) -> None:
     """Refuses a config whose ``names`` fields are not all >= 1, naming the first that is not."""
     for name in names:
         if getattr(config, name) < 1:
-            raise ValueError(f"{name} must be >= 1, got {getattr(config, name)}")
+            raise InvalidValueError(f"{name} must be >= 1, got {getattr(config, name)}")
 
 
 def _as_json(value: Any) -> Any:
@@ -316,7 +317,7 @@ def check_same_config(saved: dict[str, Any], config: Any, where: str | Path) -> 
     defaults = asdict(type(config)())
     changed = sorted(k for k, v in asdict(config).items() if k not in BOOKKEEPING and _as_json(saved.get(k, defaults[k])) != _as_json(v))
     if changed:
-        raise ValueError(f"{where} was trained with another config (changed: {changed}); use a new --run-dir or the same settings")
+        raise InvalidValueError(f"{where} was trained with another config (changed: {changed}); use a new --run-dir or the same settings")
 
 
 def finish_skill_run(run_dir: Path, output: str | Path | None, record: dict[str, Any]) -> dict[str, Any]:
@@ -401,7 +402,7 @@ def train_locomotion(
     elif resume_from is not None:
         state = load_checkpoint(Path(resume_from))
         if state.get("skill") != skill.name:
-            raise ValueError(f"{resume_from} holds a {state.get('skill')!r} skill, not {skill.name!r}")
+            raise InvalidValueError(f"{resume_from} holds a {state.get('skill')!r} skill, not {skill.name!r}")
         check_same_config(state["config"], config, resume_from)
         load_learner(state)
         if "best_body" in state:  # the best policy so far travels with the state

@@ -47,6 +47,8 @@ from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 from torchrl.record.loggers.csv import CSVLogger
 
+from torchrl_causal.errors import InvalidTypeError, InvalidValueError
+from torchrl_causal.experiment.run_directory import atomic_save, load_checkpoint
 from torchrl_causal.experts.locomotion import (
     BEST_BODY,
     EXPORT,
@@ -59,7 +61,6 @@ from torchrl_causal.experts.locomotion import (
     require_positive,
     upright_speed,
 )
-from torchrl_causal.experiment.run_directory import atomic_save, load_checkpoint
 from torchrl_causal.progress import progress
 
 __all__ = [
@@ -138,34 +139,34 @@ class PPOLocomotionConfig:
         require_positive(self, ("total_steps", "num_envs", "rollout_steps", "epochs", "minibatch_size", "hidden"))
         require_positive(self, ("eval_every", "eval_envs", "eval_steps"))
         if self.minibatch_size > self.frames_per_batch:
-            raise ValueError(
+            raise InvalidValueError(
                 f"minibatch_size ({self.minibatch_size}) exceeds a batch of num_envs x rollout_steps = {self.frames_per_batch}"
             )
         if not 0 < self.gamma < 1 or not 0 <= self.lmbda <= 1 or not 0 < self.clip_epsilon < 1:
-            raise ValueError(
+            raise InvalidValueError(
                 f"need 0 < gamma < 1, 0 <= lmbda <= 1, 0 < clip_epsilon < 1, got {self.gamma}, {self.lmbda}, {self.clip_epsilon}"
             )
         if not (self.lr > 0 and self.max_grad_norm > 0 and self.reward_scale > 0 and self.entropy_coeff >= 0 and self.critic_coeff > 0):
-            raise ValueError("lr, max_grad_norm, reward_scale and critic_coeff must be > 0 and entropy_coeff >= 0")
+            raise InvalidValueError("lr, max_grad_norm, reward_scale and critic_coeff must be > 0 and entropy_coeff >= 0")
         if self.desired_kl is not None and (not self.desired_kl > 0 or self.anneal_lr):
-            raise ValueError(f"desired_kl must be > 0 and excludes anneal_lr (both set the learning rate), got {self.desired_kl}")
+            raise InvalidValueError(f"desired_kl must be > 0 and excludes anneal_lr (both set the learning rate), got {self.desired_kl}")
         if not self.init_scale > 0.01:  # the softplus's floor
-            raise ValueError(f"init_scale must be > 0.01, got {self.init_scale}")
+            raise InvalidValueError(f"init_scale must be > 0.01, got {self.init_scale}")
         if self.speed_weight is not None and not self.speed_weight >= 0:
-            raise ValueError(f"speed_weight must be >= 0, got {self.speed_weight}")
+            raise InvalidValueError(f"speed_weight must be >= 0, got {self.speed_weight}")
         if self.command_frame is not None and not math.isfinite(self.command_frame):
-            raise ValueError(f"command_frame must be a finite angle (radians) or None, got {self.command_frame}")
+            raise InvalidValueError(f"command_frame must be a finite angle (radians) or None, got {self.command_frame}")
         if self.direction_period is not None:
             period = tuple(self.direction_period)
             if len(period) != 2 or not all(isinstance(n, int) for n in period) or not 1 <= period[0] <= period[1]:
-                raise ValueError(f"direction_period must be two steps 1 <= low <= high, got {self.direction_period!r}")
+                raise InvalidValueError(f"direction_period must be two steps 1 <= low <= high, got {self.direction_period!r}")
         if self.command_spread is not None and not 0 <= self.command_spread <= math.pi:
-            raise ValueError(f"command_spread must lie in [0, pi], got {self.command_spread} (--command-spread pi: uniform)")
+            raise InvalidValueError(f"command_spread must lie in [0, pi], got {self.command_spread} (--command-spread pi: uniform)")
         if self.widen_gate is not None:
             if self.command_spread is None or self.command_spread >= math.pi:
-                raise ValueError(f"widen_gate needs a command_spread below pi to widen from, got {self.command_spread}")
+                raise InvalidValueError(f"widen_gate needs a command_spread below pi to widen from, got {self.command_spread}")
             if not self.widen_gate > 0 or not 0 < self.widen_step <= math.pi:
-                raise ValueError(f"need widen_gate > 0 and 0 < widen_step <= pi, got {self.widen_gate}, {self.widen_step}")
+                raise InvalidValueError(f"need widen_gate > 0 and 0 < widen_step <= pi, got {self.widen_gate}, {self.widen_step}")
 
     @property
     def env_options(self) -> dict[str, Any]:
@@ -278,7 +279,7 @@ def fold_observation_normalisation(norm: RunningNormalisation, body: nn.Module) 
     layers = [copy.deepcopy(layer) for layer in body.children()] if isinstance(body, nn.Sequential) else []
     first = layers[0] if layers else None
     if not isinstance(first, nn.Linear):
-        raise TypeError(f"the body must be an nn.Sequential starting with nn.Linear, got {body}")
+        raise InvalidTypeError(f"the body must be an nn.Sequential starting with nn.Linear, got {body}")
     scale = torch.sqrt(norm.var + norm.eps)
     linear = nn.Linear(first.in_features, first.out_features)
     with torch.no_grad():
@@ -346,11 +347,11 @@ def train_locomotion_ppo(
     (a run started ``init_from`` selects among its own evaluations). Returns the final record.
     """
     if resume_from is not None and init_from is not None:
-        raise ValueError("give resume_from (continue a run) or init_from (start a new run from its learner), not both")
+        raise InvalidValueError("give resume_from (continue a run) or init_from (start a new run from its learner), not both")
     skill = SKILLS[skill] if isinstance(skill, str) else skill
     unknown = sorted((set(config.env_options) | set(config.collector_options)) - set(skill.env_options))
     if unknown:
-        raise ValueError(f"the {skill.name} skill's env takes no {unknown} (it takes {list(skill.env_options) or 'none'})")
+        raise InvalidValueError(f"the {skill.name} skill's env takes no {unknown} (it takes {list(skill.env_options) or 'none'})")
     # Applied to the collector's env, so the learner (and its normaliser) only ever see the turned observations.
     frame = _command_frame(skill, config)
     run_dir = Path(run_dir)
@@ -388,7 +389,7 @@ def train_locomotion_ppo(
         parent_scale = parent["config"].get("init_scale", PPOLocomotionConfig.init_scale)
         if parent_scale != config.init_scale:
             # The scale's softplus bias is set by init_scale: another value changes the parent's policy.
-            raise ValueError(
+            raise InvalidValueError(
                 f"{init_from} was trained with init_scale={parent_scale}, which sets the policy's noise mapping: "
                 f"pass the same (--init-scale {parent_scale}), got {config.init_scale}"
             )
@@ -396,7 +397,7 @@ def train_locomotion_ppo(
             loss.load_state_dict(parent["loss"])
             optimizer.load_state_dict(parent["optimizer"])
         except (RuntimeError, ValueError) as error:
-            raise ValueError(f"{init_from}'s learner does not fit this config (hidden={config.hidden}?): {error}") from error
+            raise InvalidValueError(f"{init_from}'s learner does not fit this config (hidden={config.hidden}?): {error}") from error
         for group in optimizer.param_groups:
             group["lr"] = config.lr  # this run's learning rate, not the parent's last one
         inherited = parent["counters"]
@@ -532,7 +533,7 @@ def _command_frame(skill: LocomotionSkill, config: PPOLocomotionConfig) -> nn.Mo
     if config.command_frame is None:
         return None
     if skill.command_frame is None:
-        raise ValueError(f"the {skill.name} skill has no command frame (command_frame is for the humanoid)")
+        raise InvalidValueError(f"the {skill.name} skill has no command frame (command_frame is for the humanoid)")
     return skill.command_frame(config.command_frame)
 
 
@@ -567,7 +568,7 @@ def export_learner(state_path: str | Path, output: str | Path, *, skill: str | L
 def _load_ppo_state(path: Path, skill: LocomotionSkill) -> dict[str, Any]:
     state = load_checkpoint(path)
     if state.get("skill") != skill.name or state.get("algorithm") != "ppo":
-        raise ValueError(f"{path} holds a {state.get('algorithm')!r} {state.get('skill')!r} skill, not PPO's {skill.name!r}")
+        raise InvalidValueError(f"{path} holds a {state.get('algorithm')!r} {state.get('skill')!r} skill, not PPO's {skill.name!r}")
     return state
 
 

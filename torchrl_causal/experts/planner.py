@@ -16,6 +16,7 @@ from collections.abc import Sequence
 import torch
 
 from torchrl_causal.envs.maze_layout import MazeLayout
+from torchrl_causal.errors import InvalidValueError
 
 __all__ = ["MazePlanner"]
 
@@ -53,9 +54,9 @@ class MazePlanner:
     ) -> None:
         goal = (int(goal_cell[0]), int(goal_cell[1]))
         if not layout.is_free_cell(goal):
-            raise ValueError(f"goal_cell {goal} is not a free cell of the maze")
+            raise InvalidValueError(f"goal_cell {goal} is not a free cell of the maze")
         if lookahead < 1 or sight_samples < 2:
-            raise ValueError(f"lookahead must be >= 1 and sight_samples >= 2, got {lookahead}, {sight_samples}")
+            raise InvalidValueError(f"lookahead must be >= 1 and sight_samples >= 2, got {lookahead}, {sight_samples}")
         self.layout = layout
         self.goal_cell = goal
         self.lookahead = lookahead

@@ -13,6 +13,8 @@ from torchrl_causal.envs.ant import locomotion_observation
 from torchrl_causal.envs.antmaze import AntMazeEnv
 from torchrl_causal.envs.humanoidmaze import HumanoidMazeEnv
 from torchrl_causal.envs.mujoco_maze import MujocoMazeEnv
+from torchrl_causal.envs.rover_maze import RoverMazeEnv, RoverParameters
+from torchrl_causal.errors import InvalidTypeError, InvalidValueError
 from torchrl_causal.experts.planner import MazePlanner
 from torchrl_causal.experts.skills import (
     HUMANOID_LOCOMOTION_WEIGHTS,
@@ -20,7 +22,6 @@ from torchrl_causal.experts.skills import (
     load_humanoid_locomotion_network,
     load_locomotion_network,
 )
-from torchrl_causal.envs.rover_maze import RoverMazeEnv, RoverParameters
 
 __all__ = ["AntMazeExpert", "HumanoidMazeExpert", "RouteChoiceExpert", "RoverExpert"]
 
@@ -30,7 +31,7 @@ class _ActionNoise:
 
     def __init__(self, std: float, seed: int | None, device: torch.device | str | None) -> None:
         if std < 0:
-            raise ValueError(f"noise_std must be >= 0, got {std}")
+            raise InvalidValueError(f"noise_std must be >= 0, got {std}")
         self.std = std
         self.rng = torch.Generator(device=device)
         self.rng.manual_seed(int(torch.randint(0, 2**62, ()).item()) if seed is None else seed)
@@ -90,7 +91,7 @@ class RoverExpert(TensorDictModuleBase):
     ) -> None:
         super().__init__()
         if not 0.0 <= min_throttle <= 1.0:
-            raise ValueError(f"min_throttle must lie in [0, 1], got {min_throttle}")
+            raise InvalidValueError(f"min_throttle must lie in [0, 1], got {min_throttle}")
         self.params: RoverParameters = env.params
         self.min_throttle = min_throttle
         self.turn_gain = turn_gain
@@ -202,7 +203,7 @@ class AntMazeExpert(_PlannedSkillExpert):
         weights: str | pathlib.Path = LOCOMOTION_WEIGHTS,
     ) -> None:
         if not isinstance(env, AntMazeEnv):
-            raise TypeError(f"AntMazeExpert drives an AntMazeEnv, got {type(env).__name__}")
+            raise InvalidTypeError(f"AntMazeExpert drives an AntMazeEnv, got {type(env).__name__}")
         super().__init__(
             env, load_locomotion_network(weights), action_dim=8, lookahead=lookahead, clearance=clearance, noise_std=noise_std, seed=seed
         )
@@ -253,7 +254,7 @@ class HumanoidMazeExpert(_PlannedSkillExpert):
         weights: str | pathlib.Path = HUMANOID_LOCOMOTION_WEIGHTS,
     ) -> None:
         if not isinstance(env, HumanoidMazeEnv):
-            raise TypeError(f"HumanoidMazeExpert drives a HumanoidMazeEnv, got {type(env).__name__}")
+            raise InvalidTypeError(f"HumanoidMazeExpert drives a HumanoidMazeEnv, got {type(env).__name__}")
         super().__init__(
             env,
             load_humanoid_locomotion_network(weights),

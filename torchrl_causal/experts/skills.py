@@ -22,6 +22,7 @@ from torch import nn
 
 from torchrl_causal.envs.ant import LOCOMOTION_ACTION_DIM, LOCOMOTION_OBSERVATION_DIM
 from torchrl_causal.envs.humanoid import COMMAND_FRAME_VECTORS, HUMANOID_SKILL_OBSERVATION_DIM
+from torchrl_causal.errors import InvalidStateError, InvalidValueError, MissingFileError
 
 __all__ = [
     "ASSETS",
@@ -87,11 +88,11 @@ def load_skill_network(path: str | pathlib.Path, network: nn.Module, *, regenera
     """
     path = pathlib.Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"no skill weights at {path}; regenerate them with `{regenerate}`")
+        raise MissingFileError(f"no skill weights at {path}; regenerate them with `{regenerate}`")
     try:
         network.load_state_dict(torch.load(path, map_location="cpu", weights_only=True))
     except Exception as err:  # a truncated file, a foreign pickle or a different architecture
-        raise RuntimeError(f"{path} is not a valid state dict of this skill network: {err}") from err
+        raise InvalidStateError(f"{path} is not a valid state dict of this skill network: {err}") from err
     return network.eval()
 
 
@@ -157,7 +158,7 @@ class CommandFrame(torch.nn.Module):
     def __init__(self, angle: float = 0.0) -> None:
         super().__init__()
         if not math.isfinite(angle):
-            raise ValueError(f"the command frame's angle must be a finite number of radians, got {angle}")
+            raise InvalidValueError(f"the command frame's angle must be a finite number of radians, got {angle}")
         self.register_buffer("command_frame", torch.tensor(float(angle)))
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
