@@ -30,9 +30,8 @@ from typing import NamedTuple
 import torch
 
 from torchrl_causal.envs import AntMazeEnv, HumanoidMazeEnv
-
-from torchrl_causal.experts import AntMazeExpert, HumanoidMazeExpert
 from torchrl_causal.evaluation import evaluate_policy
+from torchrl_causal.experts import AntMazeExpert, HumanoidMazeExpert
 
 
 class Robot(NamedTuple):

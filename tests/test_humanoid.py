@@ -11,13 +11,13 @@ a few metres alone drifts a random-action trajectory apart by 1e-3 within 200 st
 from __future__ import annotations
 
 import math
+
 import mujoco
 import numpy as np
 import ogbench
 import pytest
 import torch
 from ogbench.online_locomotion.humanoid import tolerance  # OGBench's skill reward parts
-
 from tensordict import TensorDict
 
 from torchrl_causal.envs import GustProcess, HumanoidMazeEnv
@@ -301,8 +301,8 @@ def test_maze_expert_without_trained_weights_names_the_command(tmp_path):
 
 def test_a_humanoidmaze_run_with_a_skill_body_of_ones_own_collects_trains_and_evaluates(tmp_path):
     # Issue 38's Table-1 rows are one command once a body exists: this one has random weights.
-    from torchrl_causal.experts.skills import make_skill_network
     from torchrl_causal.experiment import compose_config
+    from torchrl_causal.experts.skills import make_skill_network
     from torchrl_causal.lifecycle import run
 
     torch.manual_seed(0)

@@ -19,8 +19,8 @@ from torchrl_causal.experts.locomotion import SKILLS, make_locomotion_actor
 from torchrl_causal.experts.locomotion_ppo import (
     ADAPTIVE_LR_BOUNDS,
     PPOLocomotionConfig,
-    adapt_learning_rate,
     RunningNormalisation,
+    adapt_learning_rate,
     fold_observation_normalisation,
     gaussian_kl,
     make_ppo_actor,

@@ -18,7 +18,6 @@ from torchrl.envs import SerialEnv
 from torchrl.envs.utils import check_env_specs
 
 from torchrl_causal.envs import AntMazeEnv, GustProcess, HumanoidMazeEnv
-
 from torchrl_causal.experts import MazePlanner
 
 ENVS = (AntMazeEnv, HumanoidMazeEnv)

@@ -9,7 +9,6 @@ import torch
 from torchrl.envs.utils import check_env_specs
 
 from torchrl_causal.envs import MAZE_MAPS, MazeLayout, RoverMazeEnv, RoverParameters, rotate
-
 from torchrl_causal.experts import MazePlanner, RoverExpert
 
 

@@ -24,8 +24,8 @@ import numpy as np
 import torch
 
 from torchrl_causal.envs.base import GustProcess
-from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv
 from torchrl_causal.envs.mujoco_maze import BatchedSimulation
+from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv
 
 __all__ = [
     "ANT_XML",
