@@ -28,7 +28,6 @@ import sys
 import time
 
 import torch
-
 from gpu_throughput import LOSSES, make_batch, make_update, timed_rate
 
 ANTMAZE_WINDOW_DIM = 25 * 11 + 8 * 10

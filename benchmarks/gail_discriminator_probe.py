@@ -26,11 +26,11 @@ import torch.nn.functional as F
 from hydra.utils import get_class
 from tensordict import TensorDictBase
 
+from torchrl_causal.experiment import RunDirectory
+from torchrl_causal.experiment.builders import TRANSITION_KEYS, make_window
 from torchrl_causal.objectives import GAILDiscriminatorLoss, gail_discriminator_batch
 from torchrl_causal.objectives.utils import eval_mode
-from torchrl_causal.experiment import RunDirectory
 from torchrl_causal.trainers import GAILTrainer
-from torchrl_causal.experiment.builders import TRANSITION_KEYS, make_window
 
 CHANCE_BCE = 2 * math.log(2)
 

@@ -44,11 +44,11 @@ from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.data import Bounded
 from torchrl.objectives import SACLoss, SoftUpdate
 
-from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
-from torchrl_causal.objectives import ALPHA_CLAMP, IQLearnLoss, SQILLoss
 from torchrl_causal.experiment import compose_config
 from torchrl_causal.experiment.builders import make_imitator_env, make_policy, make_window
 from torchrl_causal.experiment.device import CPU, resolve_device
+from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
+from torchrl_causal.objectives import ALPHA_CLAMP, IQLearnLoss, SQILLoss
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
 OBSERVATION_DIM, ACTION_DIM, HIDDEN, BLOCKS, BATCH = 128, 8, 256, 3, 256

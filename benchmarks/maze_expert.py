@@ -29,8 +29,9 @@ from typing import NamedTuple
 
 import torch
 
-from torchrl_causal.envs import AntMazeEnv, AntMazeExpert, HumanoidMazeEnv, HumanoidMazeExpert
+from torchrl_causal.envs import AntMazeEnv, HumanoidMazeEnv
 from torchrl_causal.evaluation import evaluate_policy
+from torchrl_causal.experts import AntMazeExpert, HumanoidMazeExpert
 
 
 class Robot(NamedTuple):

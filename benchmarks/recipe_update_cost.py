@@ -17,7 +17,6 @@ import argparse
 import statistics
 
 import torch
-
 from antmaze_update_sizes import ANTMAZE_WINDOW_DIM
 from gpu_throughput import make_batch, make_update, timed_rate
 

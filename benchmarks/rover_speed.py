@@ -30,8 +30,9 @@ from collections.abc import Callable
 
 import torch
 
-from torchrl_causal.envs import RoverExpert, RoverMazeEnv
+from torchrl_causal.envs import RoverMazeEnv
 from torchrl_causal.envs.rover_maze import rover_dynamics, unit_heading
+from torchrl_causal.experts import RoverExpert
 
 
 def bare_physics(env: RoverMazeEnv, actions: torch.Tensor) -> float:

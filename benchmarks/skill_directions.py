@@ -23,8 +23,8 @@ from pathlib import Path
 
 import torch
 
-from torchrl_causal.envs.humanoid import load_humanoid_locomotion_network
-from torchrl_causal.envs.locomotion import evaluate_locomotion
+from torchrl_causal.experts.locomotion import evaluate_locomotion
+from torchrl_causal.experts.skills import load_humanoid_locomotion_network
 
 SPREADS: dict[str, float] = {"straight ahead": 0.0, "within pi/4": math.pi / 4, "within pi/2": math.pi / 2, "uniform": math.pi}
 

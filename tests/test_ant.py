@@ -8,8 +8,9 @@ import torch
 from torchrl.envs.utils import check_env_specs
 
 from torchrl_causal.envs import AntMazeEnv
-from torchrl_causal.envs.ant import AntLocomotionEnv, load_locomotion_network
+from torchrl_causal.envs.ant import AntLocomotionEnv
 from torchrl_causal.envs.base import GustProcess
+from torchrl_causal.experts.skills import load_locomotion_network
 
 CALM = GustProcess(probability=0.0)
 
@@ -77,7 +78,7 @@ def test_shipped_locomotion_weights_walk_in_every_direction():
     from tensordict import TensorDict
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-    from torchrl_causal.envs.locomotion import make_locomotion_actor
+    from torchrl_causal.experts.locomotion import make_locomotion_actor
 
     actor = make_locomotion_actor(load_locomotion_network())
     east, north = torch.tensor([1.0, 0.0]), torch.tensor([0.0, 1.0])

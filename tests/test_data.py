@@ -19,7 +19,8 @@ from torchrl_causal.data import (
     read_metadata,
     successful_episodes,
 )
-from torchrl_causal.envs import RouteChoiceEnv, RoverExpert, RoverMazeEnv
+from torchrl_causal.envs import RouteChoiceEnv, RoverMazeEnv
+from torchrl_causal.experts import RoverExpert
 
 EPISODES = 12
 

@@ -19,19 +19,19 @@ import pytest
 import torch
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule
-from torchrl.data import Bounded
-
 from test_trainers import build_trainer, tiny_config
+from torchrl.data import Bounded
 from torchrl.objectives import SoftUpdate
+
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.runs import read_scalar_csv
-from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
-from torchrl_causal.objectives import IQLearnLoss
-from torchrl_causal.lifecycle import run
 from torchrl_causal.experiment import compose_config
-from torchrl_causal.trainers import Trainer
 from torchrl_causal.experiment.device import PolicyOnDevice, compile_unavailable, for_cpu_env, resolve_device
 from torchrl_causal.experiment.schema import ConfigValueError, validate_config
+from torchrl_causal.lifecycle import run
+from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
+from torchrl_causal.objectives import IQLearnLoss
+from torchrl_causal.trainers import Trainer
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
 DEVICES = ["cpu", *(["cuda"] if torch.cuda.is_available() else [])]

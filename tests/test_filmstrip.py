@@ -7,8 +7,9 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from torchrl_causal.envs import AntMazeEnv, AntMazeExpert, RoverMazeEnv
+from torchrl_causal.envs import AntMazeEnv, RoverMazeEnv
 from torchrl_causal.evaluation.rendering import record_filmstrip, save_filmstrips
+from torchrl_causal.experts import AntMazeExpert
 
 SIZE = 48
 
@@ -52,8 +53,8 @@ def test_refuses_batches_and_envs_that_cannot_render():
 
 def test_cli_draws_one_row_per_run_from_the_same_start(tmp_path, capsys):
     from torchrl_causal.cli.filmstrip import filmstrip_of_run, main
-    from torchrl_causal.lifecycle import run
     from torchrl_causal.experiment import compose_config
+    from torchrl_causal.lifecycle import run
 
     tiny = [
         "env=antmaze_medium",

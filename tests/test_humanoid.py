@@ -11,13 +11,13 @@ a few metres alone drifts a random-action trajectory apart by 1e-3 within 200 st
 from __future__ import annotations
 
 import math
+
 import mujoco
 import numpy as np
 import ogbench
 import pytest
 import torch
 from ogbench.online_locomotion.humanoid import tolerance  # OGBench's skill reward parts
-
 from tensordict import TensorDict
 
 from torchrl_causal.envs import GustProcess, HumanoidMazeEnv
@@ -243,7 +243,7 @@ def test_the_shipped_skill_walks_three_metres_along_each_of_four_commands_and_ra
     # Ten seconds from a standing start facing anywhere, one command held, the tremor on. Each walk
     # is chaotic (float rounding on another CPU moves it), so the check is on rates, not on one
     # trajectory: the skill falls in ~6% of such walks (results/humanoid_locomotion/README.md).
-    from torchrl_causal.envs.humanoid import load_humanoid_locomotion_network
+    from torchrl_causal.experts.skills import load_humanoid_locomotion_network
 
     body = load_humanoid_locomotion_network()  # the package's weights, as the maze expert loads them
     angles = torch.tensor([0.0, math.pi / 2, math.pi, -math.pi / 2]).repeat_interleave(8)  # 8 walks per direction
@@ -268,8 +268,8 @@ def test_the_shipped_skill_walks_three_metres_along_each_of_four_commands_and_ra
 
 @pytest.mark.parametrize("command_frame", [None, -math.pi / 2])
 def test_maze_expert_steers_the_skill_towards_the_planner_waypoint_and_never_reads_w(tmp_path, command_frame):
-    from torchrl_causal.envs import HumanoidMazeExpert, MazePlanner
-    from torchrl_causal.envs.humanoid import humanoid_skill_network
+    from torchrl_causal.experts import HumanoidMazeExpert, MazePlanner
+    from torchrl_causal.experts.skills import humanoid_skill_network
 
     torch.manual_seed(0)
     skill = humanoid_skill_network(command_frame=command_frame)  # the loader rebuilds the frame from the weights' keys
@@ -293,7 +293,7 @@ def test_maze_expert_steers_the_skill_towards_the_planner_waypoint_and_never_rea
 
 
 def test_maze_expert_without_trained_weights_names_the_command(tmp_path):
-    from torchrl_causal.envs import HumanoidMazeExpert
+    from torchrl_causal.experts import HumanoidMazeExpert
 
     with pytest.raises(FileNotFoundError, match="--skill humanoid"):
         HumanoidMazeExpert(HumanoidMazeEnv("medium", batch_size=1, seed=0), weights=tmp_path / "missing.pt")
@@ -301,8 +301,8 @@ def test_maze_expert_without_trained_weights_names_the_command(tmp_path):
 
 def test_a_humanoidmaze_run_with_a_skill_body_of_ones_own_collects_trains_and_evaluates(tmp_path):
     # Issue 38's Table-1 rows are one command once a body exists: this one has random weights.
-    from torchrl_causal.envs.open_ground import make_skill_network
     from torchrl_causal.experiment import compose_config
+    from torchrl_causal.experts.skills import make_skill_network
     from torchrl_causal.lifecycle import run
 
     torch.manual_seed(0)
@@ -330,10 +330,10 @@ def test_turning_the_world_turns_only_the_command_frame_vectors_and_the_frame_un
         HUMANOID_SKILL_VARIABLES,
         HUMANOID_STATE_WIDTH,
         HUMANOID_XML,
-        CommandFrame,
         HumanoidReadout,
         standing_qpos,
     )
+    from torchrl_causal.experts.skills import CommandFrame
 
     model = mujoco.MjModel.from_xml_path(str(HUMANOID_XML))
     readout = HumanoidReadout(model)

@@ -11,8 +11,8 @@ import pytest
 import torch
 from test_trainers import build_trainer, tiny_config
 
-from torchrl_causal.lifecycle import run
 from torchrl_causal.experiment import ConfigValueError
+from torchrl_causal.lifecycle import run
 from torchrl_causal.trainers import gail, off_policy
 from torchrl_causal.trainers.update import ActorCriticUpdate
 

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 import torch
-
 from test_trainers import TINY
 from tiny_runs import ALGO
+
 from torchrl_causal.evaluation import load_runs
 from torchrl_causal.experiment import load_checkpoint
 

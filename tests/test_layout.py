@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import importlib
 import re
+import runpy
 import shutil
 import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -15,7 +17,8 @@ from hydra.utils import get_object
 from omegaconf import OmegaConf
 
 ROOT = Path(__file__).resolve().parents[1]
-ARCHIVED_CONFIGS = sorted((ROOT / "results" / "runs").rglob("config.yaml"))
+ARCHIVED_CONFIGS = sorted((ROOT / "results").rglob("config.yaml"))
+SHIPPED_CONFIGS = sorted((ROOT / "torchrl_causal" / "conf").rglob("*.yaml"))
 DOCUMENTS = sorted([ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "results").rglob("*.md")])
 # a weights or state file under results/ or the package, as the docs name it (no placeholders)
 NAMED_WEIGHTS = re.compile(r"(?:results|torchrl_causal)/[\w./-]+\.pt\b")
@@ -34,19 +37,66 @@ def _dotted_paths(node: object) -> Iterator[str]:
             yield from _dotted_paths(item)
 
 
-def test_archived_runs_name_code_that_still_resolves() -> None:
-    """Kept import paths, not a migration: every class or function an archived run's
-    ``config.yaml`` names (``torchrl_causal.trainers.OffPolicyILTrainer``, ...) imports."""
-    assert len(ARCHIVED_CONFIGS) >= 10, "the archived runs under results/runs/ are the point of this test"
-    named = {path for config in ARCHIVED_CONFIGS for path in _dotted_paths(OmegaConf.to_container(OmegaConf.load(config)))}
-    assert "torchrl_causal.trainers.OffPolicyILTrainer" in named  # the walk reaches what it is for
+def _unresolved(configs: list[Path]) -> tuple[set[str], list[str]]:
+    """Every dotted path the ``configs`` name, and those of them that do not import (with why)."""
+    named = {path for config in configs for path in _dotted_paths(OmegaConf.to_container(OmegaConf.load(config)))}
     unresolved = []
     for path in sorted(named):
         try:
             get_object(path)
         except Exception as error:  # noqa: BLE001 (each failure is reported with its path)
             unresolved.append(f"{path}: {error}")
+    return named, unresolved
+
+
+def test_archived_runs_name_code_that_still_resolves() -> None:
+    """Kept import paths, not a migration: every class or function an archived run's
+    ``config.yaml`` names (``torchrl_causal.trainers.OffPolicyILTrainer``, the experts at their
+    old place ``torchrl_causal.envs.AntMazeExpert``, ...) imports."""
+    assert len(ARCHIVED_CONFIGS) >= 10, "the archived runs under results/ are the point of this test"
+    named, unresolved = _unresolved(ARCHIVED_CONFIGS)
+    assert {"torchrl_causal.trainers.OffPolicyILTrainer", "torchrl_causal.envs.AntMazeExpert"} <= named  # the walk reaches what it is for
     assert not unresolved, unresolved
+
+
+def test_shipped_configs_name_code_that_resolves() -> None:
+    """Every ``_target_`` and ``trainer`` of ``torchrl_causal/conf`` imports, the experts at their new place."""
+    named, unresolved = _unresolved(SHIPPED_CONFIGS)
+    assert "torchrl_causal.experts.HumanoidMazeExpert" in named and not any(".envs." in path and "Expert" in path for path in named)
+    assert not unresolved, unresolved
+
+
+#: The experts' old import paths (archived configs, the results' commands) and where each now lives.
+OLD_PATHS = {
+    "torchrl_causal.envs.AntMazeExpert": "torchrl_causal.experts.policies.AntMazeExpert",
+    "torchrl_causal.envs.HumanoidMazeExpert": "torchrl_causal.experts.policies.HumanoidMazeExpert",
+    "torchrl_causal.envs.RoverExpert": "torchrl_causal.experts.policies.RoverExpert",
+    "torchrl_causal.envs.RouteChoiceExpert": "torchrl_causal.experts.policies.RouteChoiceExpert",
+    "torchrl_causal.envs.MazePlanner": "torchrl_causal.experts.planner.MazePlanner",
+    "torchrl_causal.envs.experts.RouteChoiceExpert": "torchrl_causal.experts.policies.RouteChoiceExpert",
+    "torchrl_causal.envs.planner.MazePlanner": "torchrl_causal.experts.planner.MazePlanner",
+    "torchrl_causal.envs.planner.MazeLayout": "torchrl_causal.envs.maze_layout.MazeLayout",
+    "torchrl_causal.envs.locomotion.train_locomotion": "torchrl_causal.experts.locomotion.train_locomotion",
+    "torchrl_causal.envs.locomotion_ppo.export_learner": "torchrl_causal.experts.locomotion_ppo.export_learner",
+}
+
+
+@pytest.mark.parametrize("old", sorted(OLD_PATHS))
+def test_old_paths_of_the_experts_give_the_same_objects(old: str) -> None:
+    assert get_object(old) is get_object(OLD_PATHS[old])
+
+
+@pytest.mark.parametrize("module", ["locomotion", "locomotion_ppo"])
+def test_old_skill_trainer_commands_run_the_same_command_line(module: str, monkeypatch, capsys) -> None:
+    """``python -m torchrl_causal.envs.locomotion_ppo --export-from ...`` (as the results quote it)
+    runs the command line of :mod:`torchrl_causal.experts.locomotion_ppo`."""
+    monkeypatch.setattr("sys.argv", [module, "--help"])
+    monkeypatch.delitem(sys.modules, f"torchrl_causal.envs.{module}", raising=False)  # run as python -m would, fresh
+    with pytest.raises(SystemExit) as done:
+        runpy.run_module(f"torchrl_causal.envs.{module}", run_name="__main__")
+    assert done.value.code == 0
+    summary = " ".join(str(importlib.import_module(f"torchrl_causal.experts.{module}").__doc__).split("\n\n")[0].split())
+    assert summary in " ".join(capsys.readouterr().out.split())  # the new module's own command line
 
 
 @pytest.mark.parametrize("command", COMMANDS)

@@ -15,12 +15,12 @@ import torch
 from tensordict import TensorDict
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from torchrl_causal.envs.locomotion import SKILLS, make_locomotion_actor
-from torchrl_causal.envs.locomotion_ppo import (
+from torchrl_causal.experts.locomotion import SKILLS, make_locomotion_actor
+from torchrl_causal.experts.locomotion_ppo import (
     ADAPTIVE_LR_BOUNDS,
     PPOLocomotionConfig,
-    adapt_learning_rate,
     RunningNormalisation,
+    adapt_learning_rate,
     fold_observation_normalisation,
     gaussian_kl,
     make_ppo_actor,
@@ -211,7 +211,7 @@ def test_reward_options_the_skills_env_lacks_are_refused(tmp_path) -> None:
 
 
 def test_the_best_evaluation_is_the_fastest_upright_one_not_the_fastest(tmp_path, monkeypatch) -> None:
-    import torchrl_causal.envs.locomotion_ppo as ppo
+    import torchrl_causal.experts.locomotion_ppo as ppo
 
     evaluations = iter([{"speed": 0.5, "fall_rate": 1.0, "steps_to_fall": 30.0}, {"speed": 0.1, "fall_rate": 0.0, "steps_to_fall": 10.0}])
     monkeypatch.setattr(ppo, "evaluate_locomotion", lambda *args, **kwargs: next(evaluations))
@@ -220,7 +220,7 @@ def test_the_best_evaluation_is_the_fastest_upright_one_not_the_fastest(tmp_path
 
 
 def test_the_command_line_sets_the_config_it_names(tmp_path, monkeypatch) -> None:
-    from torchrl_causal.envs import locomotion_ppo
+    from torchrl_causal.experts import locomotion_ppo
 
     seen = {}
     monkeypatch.setattr(locomotion_ppo, "train_locomotion_ppo", lambda run_dir, config, **kw: seen.update(config=config, **kw) or {})
@@ -240,7 +240,7 @@ def test_the_command_line_sets_the_config_it_names(tmp_path, monkeypatch) -> Non
 
 
 def test_the_commands_widen_at_each_evaluation_that_reaches_the_gate(tmp_path, monkeypatch) -> None:
-    import torchrl_causal.envs.locomotion_ppo as ppo
+    import torchrl_causal.experts.locomotion_ppo as ppo
 
     # Upright speeds 0.4 (gate met), 0.1 (not), 0.5 (met), 0.5 (met, but pi is the ceiling) at 2, 4, 6 and 8 batches.
     speeds = iter([0.4, 0.1, 0.5, 0.5])
@@ -278,7 +278,8 @@ def test_a_curriculum_without_room_to_widen_is_refused_in_one_line(change, messa
 
 
 def test_a_command_frame_run_learns_on_turned_observations_and_exports_a_body_for_the_envs_own(tmp_path) -> None:
-    from torchrl_causal.envs.humanoid import COMMAND_FRAME_VECTORS, CommandFrame, load_humanoid_locomotion_network
+    from torchrl_causal.envs.humanoid import COMMAND_FRAME_VECTORS
+    from torchrl_causal.experts.skills import CommandFrame, load_humanoid_locomotion_network
 
     plain = train_locomotion_ppo(tmp_path / "world", _config(FRAMES, hidden=256), progress_bar=False)
     assert "exported" not in plain
@@ -305,7 +306,7 @@ def test_a_command_frame_run_learns_on_turned_observations_and_exports_a_body_fo
 
 
 def test_longer_command_legs_reach_the_training_env_only_and_the_run_resumes_with_them(tmp_path, monkeypatch) -> None:
-    import torchrl_causal.envs.locomotion_ppo as ppo
+    import torchrl_causal.experts.locomotion_ppo as ppo
 
     evaluated_options = []
 
@@ -330,7 +331,7 @@ def test_longer_command_legs_reach_the_training_env_only_and_the_run_resumes_wit
 
 
 def test_a_states_current_learner_exports_as_the_run_exports_its_best(tmp_path, monkeypatch) -> None:
-    import torchrl_causal.envs.locomotion_ppo as ppo
+    import torchrl_causal.experts.locomotion_ppo as ppo
 
     # Rising scores: the last evaluation is the best, so the state's learner is the best body.
     scores = iter([0.1, 0.2])

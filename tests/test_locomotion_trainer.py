@@ -11,7 +11,7 @@ import json
 import pytest
 import torch
 
-from torchrl_causal.envs.locomotion import SKILLS, train_locomotion
+from torchrl_causal.experts.locomotion import SKILLS, train_locomotion
 
 FRAMES = 200  # LocomotionConfig.frames_per_batch
 
@@ -64,7 +64,7 @@ def test_resume_refuses_another_config_or_skill(tmp_path):
 
 
 def test_the_command_line_exports_into_its_run_directory_unless_told_otherwise(tmp_path, monkeypatch):
-    from torchrl_causal.envs import locomotion
+    from torchrl_causal.experts import locomotion
 
     seen = {}
     monkeypatch.setattr(locomotion, "train_locomotion", lambda run_dir, config, **kw: seen.update(run_dir=run_dir, **kw) or {})

@@ -8,11 +8,11 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from test_trainers import tiny_config
+
 from torchrl_causal.evaluation.runs import read_scalar_csv
-from torchrl_causal.lifecycle import run
 from torchrl_causal.experiment import ConfigValueError
+from torchrl_causal.lifecycle import run
 
 BC = ("algo.epochs=4", "algo.eval_every=2")
 

@@ -14,10 +14,10 @@ from torchrl_causal.experiment.memory import (
     EXACT_K,
     GB,
     Footprint,
-    measured_transition_bytes,
     check_footprint,
     check_run_fits,
     encoded_transition_bytes,
+    measured_transition_bytes,
     run_footprint,
 )
 

@@ -23,7 +23,8 @@ from torchrl_causal.data import (  # noqa: E402
     read_metadata,
 )
 from torchrl_causal.data.minari_format import from_minari_replay, read_minari_metadata  # noqa: E402
-from torchrl_causal.envs import RouteChoiceEnv, RouteChoiceExpert, RoverExpert, RoverMazeEnv  # noqa: E402
+from torchrl_causal.envs import RouteChoiceEnv, RoverMazeEnv  # noqa: E402
+from torchrl_causal.experts import RouteChoiceExpert, RoverExpert  # noqa: E402
 from torchrl_causal.transforms import CausalWindowTransform  # noqa: E402
 
 EPISODES = 3
@@ -191,6 +192,7 @@ def test_missing_extra_names_it(exported, monkeypatch):
 
 def test_training_from_the_exported_set_equals_training_from_ours(tmp_path) -> None:
     from test_trainers import tiny_config
+
     from torchrl_causal.lifecycle import run
 
     ours = tiny_config(tmp_path / "a", "route_choice", "bc", True)
@@ -205,6 +207,7 @@ def test_training_from_the_exported_set_equals_training_from_ours(tmp_path) -> N
 
 def test_a_run_refuses_a_minari_set_of_another_env_before_its_directory(tmp_path, exported) -> None:
     from test_trainers import tiny_config
+
     from torchrl_causal.lifecycle import run
 
     cfg = tiny_config(tmp_path / "runs", "route_choice", "bc", True, f"demos.source=minari:{exported[1]}")

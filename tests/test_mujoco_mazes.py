@@ -17,7 +17,8 @@ import torch
 from torchrl.envs import SerialEnv
 from torchrl.envs.utils import check_env_specs
 
-from torchrl_causal.envs import AntMazeEnv, GustProcess, HumanoidMazeEnv, MazePlanner
+from torchrl_causal.envs import AntMazeEnv, GustProcess, HumanoidMazeEnv
+from torchrl_causal.experts import MazePlanner
 
 ENVS = (AntMazeEnv, HumanoidMazeEnv)
 

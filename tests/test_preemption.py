@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 from hydra.utils import get_class
-
 from test_trainers import _interrupt_at, tiny_config
-from torchrl_causal.lifecycle import run
+
 from torchrl_causal.experiment import RunDirectory, RunInterrupted
+from torchrl_causal.lifecycle import run
 
 BC = ("algo.epochs=4", "algo.eval_every=2", "checkpoint_every_s=3600")
 

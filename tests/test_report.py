@@ -16,6 +16,10 @@ from pathlib import Path
 import pytest
 from omegaconf import OmegaConf
 
+from torchrl_causal.cli.archive import main as archive_main
+from torchrl_causal.cli.report import main as report_main
+from torchrl_causal.cli.status import main as status_main
+from torchrl_causal.cli.status import run_statuses
 from torchrl_causal.evaluation import (
     CSV_COLUMNS,
     TABLE1_ALGORITHMS,
@@ -26,13 +30,9 @@ from torchrl_causal.evaluation import (
     normalised_returns,
     write_report,
 )
-from torchrl_causal.cli.archive import main as archive_main
 from torchrl_causal.evaluation.reporting import NOTES_BEGIN, NOTES_END
 from torchrl_causal.evaluation.runs import archive_runs, eval_path
 from torchrl_causal.evaluation.tables import EffectTargets, seed_effect_checks, seed_spread, seeds_markdown
-from torchrl_causal.cli.report import main as report_main
-from torchrl_causal.cli.status import main as status_main
-from torchrl_causal.cli.status import run_statuses
 from torchrl_causal.experiment import RunDirectory
 
 # Appendix F, AntMaze-Medium column: raw E[Y] and success rate (%), deployment regime.

@@ -8,7 +8,8 @@ import pytest
 import torch
 from torchrl.envs.utils import check_env_specs
 
-from torchrl_causal.envs import MAZE_MAPS, MazeLayout, MazePlanner, RoverExpert, RoverMazeEnv, RoverParameters, rotate
+from torchrl_causal.envs import MAZE_MAPS, MazeLayout, RoverMazeEnv, RoverParameters, rotate
+from torchrl_causal.experts import MazePlanner, RoverExpert
 
 
 def _wall_rectangles(maze: str) -> torch.Tensor:

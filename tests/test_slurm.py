@@ -29,6 +29,7 @@ exit 1
 
 def _launcher(*overrides: str):
     from hydra import compose, initialize_config_dir
+
     from torchrl_causal.experiment.config import CONFIG_DIR, CONFIG_NAME
 
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):

@@ -19,10 +19,10 @@ from __future__ import annotations
 import math
 
 import pytest
-from tiny_runs import tiny
 import torch
 from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
+from tiny_runs import tiny
 from torch import nn
 from torchrl.data import Bounded
 from torchrl.objectives import SoftUpdate

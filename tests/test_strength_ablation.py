@@ -6,15 +6,14 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from tiny_runs import tiny
 import torch
+from tiny_runs import tiny
 
 import torchrl_causal.cli.strength_ablation as ablation
-from torchrl_causal.lifecycle import evaluate_run
 from torchrl_causal.evaluation.reporting import NOTES_BEGIN, NOTES_END
 from torchrl_causal.evaluation.runs import archive_runs
-from torchrl_causal.lifecycle import run
 from torchrl_causal.experiment import compose_config
+from torchrl_causal.lifecycle import evaluate_run, run
 
 EPISODES = 8
 TINY_BC = tiny("bc", "eval.final_episodes=4", "algo.epochs=2")

@@ -20,19 +20,26 @@ PACKAGE = Path(__file__).resolve().parents[1] / "torchrl_causal"
 NAME = PACKAGE.name
 
 #: The floors, ground first: a unit (a sub-package, or a module at the package root)
-#: imports only units of lower floors. ``envs`` stands on ``experiment`` because the ant
-#: skill's trainer (``envs/locomotion.py``) checkpoints with the run directory's helpers.
+#: imports only units of lower floors. ``envs`` stands right above ``graphs`` (the envs are
+#: pure simulation); ``experts`` (the planner, the experts, the walking skills and their
+#: trainers) stands on ``envs`` and on ``experiment``, whose run-directory helpers the skill
+#: trainers checkpoint with. The old module paths of what left ``envs`` (:data:`FORWARDS`)
+#: stand on the top floor with the README's command paths.
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("errors", "conf", "extras", "algorithms"),
     ("graphs", "progress", "compat"),
+    ("envs",),
     ("modules", "objectives", "transforms", "data"),
     ("experiment",),
-    ("envs",),
+    ("experts",),
     ("trainers", "evaluation"),
     ("lifecycle",),
     ("cli",),
-    ("train", "evaluate", "report", "status", "archive", "demo", "filmstrip", "strength_ablation"),  # README paths
+    ("train", "evaluate", "report", "status", "archive", "demo", "filmstrip", "strength_ablation", "forwards"),  # old paths
 )
+#: Modules kept at an old path, forwarding to where the code now lives (archived configs and
+#: the results' commands name them): nothing in the package imports them.
+FORWARDS = frozenset(f"{NAME}.envs.{name}" for name in ("planner", "experts", "locomotion", "locomotion_ppo"))
 FLOOR = {unit: floor for floor, units in enumerate(LAYERS) for unit in units}
 
 
@@ -42,6 +49,8 @@ def _module_name(path: Path) -> str:
 
 
 def _unit(module: str) -> str:
+    if module in FORWARDS:
+        return "forwards"
     parts = module.split(".")
     return parts[1] if len(parts) > 1 else "__init__"
 
@@ -128,6 +137,26 @@ def test_upward_finds_an_import_from_a_lower_floor() -> None:
 
 def test_no_sub_package_imports_one_above_it() -> None:
     assert not _upward(_edges()), _upward(_edges())
+
+
+def test_forwards_are_modules_of_the_package() -> None:
+    """Each old path of :data:`FORWARDS` is a file (a typo would exempt nothing)."""
+    assert FORWARDS <= {_module_name(path) for path in SOURCES}
+
+
+def test_envs_import_nothing_above_them_at_runtime() -> None:
+    """What the envs import (their forwarding modules aside) reaches no unit above ``envs``:
+    the package's ground is graphs and the envs, which know no expert, trainer or run."""
+    edges = _edges(runtime_only=True)
+    reached, todo = set(), [m for m in edges if _unit(m) == "envs"]
+    while todo:
+        module = todo.pop()
+        for target in edges.get(module, ()):
+            if target not in reached:
+                reached.add(target)
+                todo.append(target)
+    above = sorted(t for t in reached if _unit(t) != "__init__" and FLOOR.get(_unit(t), 0) > FLOOR["envs"])
+    assert not above, above
 
 
 def test_evaluation_does_not_import_trainers() -> None:

@@ -17,13 +17,13 @@ import torch
 from hydra.utils import get_class
 from omegaconf import OmegaConf
 from tensordict import MemoryMappedTensor, TensorDict
+from tiny_runs import ALGO, QUICK, ROVER
 
+from torchrl_causal.cli.archive import main as archive_main
 from torchrl_causal.data import read_metadata
 from torchrl_causal.evaluation import load_runs, write_report
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.runs import read_scalar_csv
-from torchrl_causal.cli.archive import main as archive_main
-from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.experiment import (
     CheckpointError,
     ConfigMismatchError,
@@ -34,11 +34,11 @@ from torchrl_causal.experiment import (
     compose_config,
     load_checkpoint,
 )
-from torchrl_causal.experiment.run_directory import carry_runs
 from torchrl_causal.experiment.builders import make_window
+from torchrl_causal.experiment.run_directory import carry_runs
+from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.lifecycle import run
 from torchrl_causal.trainers import Trainer
-from tiny_runs import ALGO, QUICK, ROVER
 
 TINY = [*QUICK, "eval.trajectories=2"]
 ENV_TINY = {"rovermaze_u": ROVER, "route_choice": ["env=route_choice"]}
@@ -577,7 +577,8 @@ def test_the_policy_record_tells_skill_weights_apart(maze_expert: str) -> None:
     """Two maze experts of one class and settings differ in the record iff their skill's weights
     do, for every shipped skill body (the humanoid's holds a 0-d buffer, ``command_frame``)."""
     from torchrl_causal.data import policy_record
-    from torchrl_causal.envs import AntMazeEnv, AntMazeExpert, HumanoidMazeEnv, HumanoidMazeExpert
+    from torchrl_causal.envs import AntMazeEnv, HumanoidMazeEnv
+    from torchrl_causal.experts import AntMazeExpert, HumanoidMazeExpert
 
     env_class, expert_class = {"ant": (AntMazeEnv, AntMazeExpert), "humanoid": (HumanoidMazeEnv, HumanoidMazeExpert)}[maze_expert]
     env = env_class("medium", batch_size=1, seed=0)

@@ -9,8 +9,9 @@ import torch
 
 iio = pytest.importorskip("imageio.v3", reason="the [video] extra is not installed")
 
-from torchrl_causal.envs import AntMazeEnv, AntMazeExpert, RoverMazeEnv  # noqa: E402
+from torchrl_causal.envs import AntMazeEnv, RoverMazeEnv  # noqa: E402
 from torchrl_causal.evaluation.video import VideoFile, record_video  # noqa: E402
+from torchrl_causal.experts import AntMazeExpert  # noqa: E402
 
 SIZE, STEPS, EVERY, SEED = 64, 60, 10, 3
 

@@ -1,9 +1,11 @@
 """torchrl-causal: TorchRL components for causal imitation learning under unobserved confounding.
 
-Layout (arrows only point down): ``graphs`` (pure Python causal machinery) →
-``envs`` → ``transforms`` → ``modules`` → ``objectives`` → ``data`` → ``trainers`` →
-``evaluation``. Causal knowledge enters training through one door: the
-:class:`~torchrl_causal.graphs.AdjustmentWindow` that ``graphs`` computes and
+Layout (each imports only what stands before it): ``graphs`` (pure Python causal machinery) →
+``envs`` (the confounded envs) → ``transforms``, ``modules``, ``objectives``, ``data`` →
+``experiment`` (configs and run directories) → ``experts`` (the planner, the experts, the
+walking skills and their trainers) → ``trainers``, ``evaluation`` → ``lifecycle`` → ``cli``
+(``tests/test_structure.py`` holds the package to it). Causal knowledge enters training through
+one door: the :class:`~torchrl_causal.graphs.AdjustmentWindow` that ``graphs`` computes and
 :class:`~torchrl_causal.transforms.CausalWindowTransform` applies.
 """
 

@@ -23,6 +23,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from torchrl_causal.errors import UnknownKeyError
+
 __all__ = ["ALGORITHMS", "Algorithm", "ROWS", "ROW_SETS", "Row", "TABLE1_ROWS", "algorithm", "row_names"]
 
 
@@ -63,7 +65,7 @@ def algorithm(name: str) -> Algorithm:
     try:
         return _BY_NAME[name]
     except KeyError:
-        raise KeyError(f"no algorithm is called {name!r}; the registered ones are {sorted(_BY_NAME)}") from None
+        raise UnknownKeyError(f"no algorithm is called {name!r}; the registered ones are {sorted(_BY_NAME)}") from None
 
 
 @dataclass(frozen=True)

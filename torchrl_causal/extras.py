@@ -12,6 +12,8 @@ import importlib
 import importlib.util
 from types import ModuleType
 
+from torchrl_causal.errors import MissingDependencyError, UnknownKeyError
+
 __all__ = ["EXTRAS", "install_line", "missing_extra", "require_extra"]
 
 # module -> the extra of pyproject.toml that installs it
@@ -34,7 +36,7 @@ def install_line(module: str) -> str:
         "pip install 'torchrl-causal[wandb]'"
     """
     if module not in EXTRAS:
-        raise KeyError(f"{module!r} is not an optional dependency; known: {sorted(EXTRAS)}")
+        raise UnknownKeyError(f"{module!r} is not an optional dependency; known: {sorted(EXTRAS)}")
     return f"pip install 'torchrl-causal[{EXTRAS[module]}]'"
 
 
@@ -77,5 +79,5 @@ def require_extra(purpose: str, module: str) -> ModuleType:
     """
     message = missing_extra(purpose, module)
     if message:
-        raise ImportError(message)
+        raise MissingDependencyError(message)
     return importlib.import_module(module)

@@ -27,6 +27,7 @@ from omegaconf import DictConfig
 from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.data.demonstrations import DatasetError
+from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.experiment.builders import check_demonstrations, make_window
@@ -238,12 +239,12 @@ def open_run(
 
 def _check_evaluation(regime: str, episodes: int, num_envs: int | None, trajectories: int, confounding_strength: float | None) -> None:
     if regime not in REGIMES:
-        raise ValueError(f"regime={regime!r} must be one of {', '.join(REGIMES)}")
+        raise InvalidValueError(f"regime={regime!r} must be one of {', '.join(REGIMES)}")
     for name, value, least in (("episodes", episodes, 1), ("num_envs", num_envs, 1), ("trajectories", trajectories, 0)):
         if value is not None and int(value) < least:
-            raise ValueError(f"{name}={value} is out of range: it must be >= {least}")
+            raise InvalidValueError(f"{name}={value} is out of range: it must be >= {least}")
     if confounding_strength is not None and not 0.0 <= float(confounding_strength) <= 1.0:
-        raise ValueError(f"confounding_strength={confounding_strength} is out of range: it must lie in [0, 1]")
+        raise InvalidValueError(f"confounding_strength={confounding_strength} is out of range: it must lie in [0, 1]")
 
 
 def evaluate_run(

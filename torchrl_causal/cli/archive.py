@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
+from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.evaluation.runs import archive_runs
 from torchrl_causal.experiment.run_directory import carry_runs
 
@@ -41,7 +42,7 @@ def main(argv: Sequence[str] | None = None) -> list[Path]:
     args = parse_arguments("archive", argv_or_sys(argv), OPTIONS)
     with one_line_errors():
         if args["carry"] and args["policies"]:
-            raise ValueError("carry=true copies every checkpoint already; leave out policies=true")
+            raise InvalidValueError("carry=true copies every checkpoint already; leave out policies=true")
         archived = (
             carry_runs(args["runs"], args["out"]) if args["carry"] else archive_runs(args["runs"], args["out"], policies=args["policies"])
         )

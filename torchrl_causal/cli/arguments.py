@@ -35,6 +35,8 @@ from typing import Any, cast
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from torchrl_causal.errors import InvalidTypeError
+
 __all__ = ["REQUIRED", "Option", "argv_or_sys", "one_line_errors", "parse_arguments", "usage"]
 
 #: The default of an argument that must be given.
@@ -94,7 +96,7 @@ def _convert(name: str, raw: Any, kind: type) -> Any:
         if isinstance(raw, (str, int, float)) and not isinstance(raw, bool) and str(raw):
             return str(raw)
         raise SystemExit(f"error: {text} must be a non-empty string")
-    raise TypeError(f"unsupported option kind {kind!r}")
+    raise InvalidTypeError(f"unsupported option kind {kind!r}")
 
 
 def _check(name: str, value: Any, option: Option) -> None:

@@ -24,11 +24,11 @@ from typing import Any
 from omegaconf import OmegaConf
 from torchrl.envs import EnvBase
 
-from torchrl_causal.evaluation.metrics import Policy
 from torchrl_causal.cli.arguments import one_line_errors
+from torchrl_causal.evaluation.metrics import Policy
 from torchrl_causal.evaluation.rendering import Filmstrip, RenderingUnavailable, record_filmstrip, save_filmstrips
-from torchrl_causal.experiment import CheckpointError
 from torchrl_causal.evaluation.video import VIDEO_FORMATS, RecordedVideo, record_video
+from torchrl_causal.experiment import CheckpointError
 from torchrl_causal.lifecycle import open_run
 
 __all__ = ["filmstrip_of_run", "main", "video_of_run"]

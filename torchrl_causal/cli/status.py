@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
+from torchrl_causal.errors import InvalidValueError, MissingFileError
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.experiment.provenance import RUNTIME_FIELDS, identity_changes
 from torchrl_causal.experiment.run_directory import CONFIG_FILE, RunDirectory
@@ -81,9 +82,9 @@ def run_statuses(root: str | Path) -> list[dict[str, str]]:
     """
     root = Path(root)
     if not root.exists():
-        raise FileNotFoundError(f"runs folder {root} does not exist")
+        raise MissingFileError(f"runs folder {root} does not exist")
     if not root.is_dir():
-        raise NotADirectoryError(f"runs={root} is a file, not a folder of runs")
+        raise InvalidValueError(f"runs={root} is a file, not a folder of runs")
     rows = []
     for config_file in sorted(root.rglob(CONFIG_FILE)):
         if any(part.startswith(".") for part in config_file.relative_to(root).parts[:-1]):

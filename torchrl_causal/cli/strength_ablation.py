@@ -31,6 +31,7 @@ from pathlib import Path
 import torch
 
 from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
+from torchrl_causal.errors import InvalidValueError, MissingFileError
 from torchrl_causal.evaluation.plots import plot_ablation
 from torchrl_causal.evaluation.reporting import notes_to_keep, provenance_markdown
 from torchrl_causal.evaluation.runs import RunRecord, load_runs
@@ -69,15 +70,15 @@ def strength_ablation(
     """
     runs = load_runs(runs_root)
     if not runs:
-        raise FileNotFoundError(f"no evaluated runs below {runs_root} (expected */config.yaml with eval/*.json)")
+        raise MissingFileError(f"no evaluated runs below {runs_root} (expected */config.yaml with eval/*.json)")
     settings = {run.setting._replace(strength=0.0) for run in runs}
     if len(settings) > 1:
-        raise ValueError(
+        raise InvalidValueError(
             f"runs below {runs_root} differ in more than the strength: {sorted(settings)}; point runs= at one setting's folder"
         )
     bad = [s for s in strengths if not 0.0 <= float(s) <= 1.0]
     if bad:
-        raise ValueError(f"strengths must lie in [0, 1], got {bad}")
+        raise InvalidValueError(f"strengths must lie in [0, 1], got {bad}")
     records = []
     for run in runs:
         try:
@@ -95,7 +96,7 @@ def strength_ablation(
             for strength, result in evaluations.items()
         ]
     if not records:
-        raise FileNotFoundError(
+        raise MissingFileError(
             f"no run below {runs_root} could be evaluated at strengths {list(strengths)}: "
             "their selected policies are gone and they hold no such records"
         )

@@ -20,6 +20,7 @@ place only once complete, so an interrupted collection leaves nothing at ``path`
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
 import math
 import os
@@ -34,7 +35,7 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.envs import EnvBase
 
-from torchrl_causal.errors import TorchRLCausalError
+from torchrl_causal.errors import ExistingFileError, InvalidValueError, TorchRLCausalError
 from torchrl_causal.progress import progress as progress_reporter
 
 __all__ = [
@@ -46,6 +47,7 @@ __all__ = [
     "env_config",
     "env_expectation",
     "collect_demonstrations",
+    "current_class_path",
     "load_demonstrations",
     "policy_record",
     "read_metadata",
@@ -101,10 +103,11 @@ def policy_record(policy: Callable[[TensorDictBase], TensorDictBase]) -> dict[st
     class walks another path, and its old demonstrations must not be reused silently.
 
     Examples:
-        >>> from torchrl_causal.envs import RoverExpert, RoverMazeEnv
+        >>> from torchrl_causal.envs import RoverMazeEnv
+        >>> from torchrl_causal.experts import RoverExpert
         >>> record = policy_record(RoverExpert(RoverMazeEnv(maze="u"), noise_std=0.1, seed=0))
         >>> record["policy"], record["policy_settings"]["noise_std"], record["policy_weights"] is not None
-        ('torchrl_causal.envs.experts.RoverExpert', 0.1, True)
+        ('torchrl_causal.experts.policies.RoverExpert', 0.1, True)
     """
     weights = None
     if isinstance(policy, torch.nn.Module):
@@ -146,7 +149,7 @@ def _rollout_episodes(
     against the expert's 87%).
     """
     if env.batch_size == ():
-        raise ValueError("collect_demonstrations needs a batched env (batch_size (B,) or larger)")
+        raise InvalidValueError("collect_demonstrations needs a batched env (batch_size (B,) or larger)")
     n_envs = env.batch_size.numel()
     steps: list[TensorDictBase] = []
     finished: list[tuple[int, int, int]] = []  # (end step, env index, start step)
@@ -193,7 +196,7 @@ def collect_demonstrations(
 
     Args:
         env: a batched env (its sub-envs run episodes in parallel and auto-reset).
-        policy: a TensorDict policy (e.g. :class:`~torchrl_causal.envs.RoverExpert`).
+        policy: a TensorDict policy (e.g. :class:`~torchrl_causal.experts.RoverExpert`).
         episodes: number of complete episodes to store.
         path: dataset directory to create.
         seed: seeds ``env`` before collecting (recorded in the metadata).
@@ -205,7 +208,8 @@ def collect_demonstrations(
 
     Examples:
         >>> import tempfile
-        >>> from torchrl_causal.envs import RoverExpert, RoverMazeEnv
+        >>> from torchrl_causal.envs import RoverMazeEnv
+        >>> from torchrl_causal.experts import RoverExpert
         >>> env = RoverMazeEnv(maze="u", batch_size=(8,))
         >>> path = Path(tempfile.mkdtemp()) / "u_demos"
         >>> data = collect_demonstrations(env, RoverExpert(env), 8, path, seed=0, progress=False)
@@ -215,10 +219,10 @@ def collect_demonstrations(
         True
     """
     if not isinstance(episodes, int) or episodes < 1:
-        raise ValueError(f"episodes must be a positive int, got {episodes!r}")
+        raise InvalidValueError(f"episodes must be a positive int, got {episodes!r}")
     path = Path(path)
     if path.exists() and not overwrite:
-        raise FileExistsError(f"a dataset already exists at {path} (pass overwrite=True to replace it)")
+        raise ExistingFileError(f"a dataset already exists at {path} (pass overwrite=True to replace it)")
     if seed is not None:
         env.set_seed(seed)
     data = _flatten(_rollout_episodes(env, policy, episodes, progress))
@@ -313,8 +317,29 @@ def check_expected(actual: Any, expected: Any, where: str) -> None:
             if field not in actual:
                 raise DatasetError(f"dataset metadata has no field {name!r} (expected {value!r})")
             check_expected(actual[field], value, name)
-    elif actual != expected:
+    elif actual != expected and not (where == "policy" and current_class_path(actual) == expected):
         raise DatasetError(f"dataset metadata field {where!r} is {actual!r}, expected {expected!r}")
+
+
+def current_class_path(path: Any) -> Any:
+    """The dotted path by which the class at ``path`` (one of this package's) names itself now:
+    a set recorded by an expert before it moved (``torchrl_causal.envs.experts.RoverExpert``, an
+    old path kept importable) is the same expert's. Anything else is returned as it is.
+
+    Examples:
+        >>> current_class_path("torchrl_causal.envs.experts.RoverExpert")
+        'torchrl_causal.experts.policies.RoverExpert'
+        >>> current_class_path("torchrl_causal.no_such_module.Expert")
+        'torchrl_causal.no_such_module.Expert'
+    """
+    if not isinstance(path, str) or not path.startswith("torchrl_causal."):
+        return path  # imports only this package's modules, never one a file names
+    module, _, name = path.rpartition(".")
+    try:
+        found = getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError):
+        return path
+    return f"{found.__module__}.{found.__qualname__}" if isinstance(found, type) else path
 
 
 def load_demonstrations(

@@ -48,6 +48,7 @@ from torchrl_causal.data.demonstrations import (
     load_demonstrations,
     read_metadata,
 )
+from torchrl_causal.errors import ExistingFileError
 from torchrl_causal.extras import require_extra
 
 __all__ = [
@@ -179,7 +180,8 @@ def export_minari(dataset: str | os.PathLike, dataset_id: str, *, root: str | os
     Examples:
         >>> import tempfile
         >>> from torchrl_causal.data import collect_demonstrations
-        >>> from torchrl_causal.envs import RoverExpert, RoverMazeEnv
+        >>> from torchrl_causal.envs import RoverMazeEnv
+        >>> from torchrl_causal.experts import RoverExpert
         >>> env = RoverMazeEnv(maze="u", batch_size=(2,))
         >>> folder = Path(tempfile.mkdtemp())
         >>> ours = collect_demonstrations(env, RoverExpert(env), 2, folder / "ours", seed=0, progress=False)
@@ -200,7 +202,7 @@ def export_minari(dataset: str | os.PathLike, dataset_id: str, *, root: str | os
     root = Path(root) if root is not None else _default_root()
     target = root / dataset_id
     if target.exists():
-        raise FileExistsError(f"a Minari dataset {dataset_id!r} already exists at {target}")
+        raise ExistingFileError(f"a Minari dataset {dataset_id!r} already exists at {target}")
     minari.dataset.minari_dataset.parse_dataset_id(dataset_id)  # a malformed id fails before any work
     # Written in a staging folder and moved into place whole: an interrupted export leaves nothing at target.
     root.mkdir(parents=True, exist_ok=True)

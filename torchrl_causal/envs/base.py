@@ -29,6 +29,8 @@ from tensordict.utils import NestedKey
 from torchrl.data import Binary, Composite, TensorSpec, Unbounded
 from torchrl.envs import EnvBase
 
+from torchrl_causal.errors import InvalidValueError
+
 if TYPE_CHECKING:
     from torchrl_causal.graphs import TimeSliceTemplate
 
@@ -91,11 +93,11 @@ class GustProcess:
 
     def __post_init__(self) -> None:
         if self.period < 1:
-            raise ValueError(f"gust period must be >= 1, got {self.period}")
+            raise InvalidValueError(f"gust period must be >= 1, got {self.period}")
         if not 0.0 <= self.probability <= 1.0:
-            raise ValueError(f"gust probability must lie in [0, 1], got {self.probability}")
+            raise InvalidValueError(f"gust probability must lie in [0, 1], got {self.probability}")
         if not 0.0 <= self.low <= self.high:
-            raise ValueError(f"gust magnitude range must satisfy 0 <= low <= high, got [{self.low}, {self.high}]")
+            raise InvalidValueError(f"gust magnitude range must satisfy 0 <= low <= high, got [{self.low}, {self.high}]")
 
     def draw(
         self,
@@ -182,20 +184,20 @@ def _copy_state(value: Any, device: torch.device | None = None) -> Any:
 
 def _validate_regime(regime: str) -> str:
     if regime not in REGIMES:
-        raise ValueError(f"regime must be one of {REGIMES}, got {regime!r}")
+        raise InvalidValueError(f"regime must be one of {REGIMES}, got {regime!r}")
     return regime
 
 
 def _validate_strength(confounding_strength: float) -> float:
     strength = float(confounding_strength)
     if not 0.0 <= strength <= 1.0:
-        raise ValueError(f"confounding_strength must lie in [0, 1], got {confounding_strength!r}")
+        raise InvalidValueError(f"confounding_strength must lie in [0, 1], got {confounding_strength!r}")
     return strength
 
 
 def _validate_horizon(horizon: int) -> int:
     if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
-        raise ValueError(f"horizon must be a positive int, got {horizon!r}")
+        raise InvalidValueError(f"horizon must be a positive int, got {horizon!r}")
     return horizon
 
 

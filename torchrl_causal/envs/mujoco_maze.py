@@ -31,7 +31,8 @@ from tensordict.utils import NestedKey
 from torchrl.data import Bounded, TensorSpec, Unbounded
 
 from torchrl_causal.envs.base import GustConfoundedEnv, Regime
-from torchrl_causal.envs.planner import MAZE_MAPS, MazeLayout
+from torchrl_causal.envs.maze_layout import MAZE_MAPS, MazeLayout
+from torchrl_causal.errors import InvalidStateError, InvalidValueError
 
 __all__ = ["MAZE_HEIGHT", "MAZE_SIZE_SCALING", "BatchedSimulation", "MazeSimulator", "MazeTask", "MujocoMazeEnv", "OffscreenRenderer"]
 
@@ -56,10 +57,10 @@ class MazeTask:
 
     def __post_init__(self) -> None:
         if self.maze not in MAZE_MAPS:
-            raise ValueError(f"maze must be one of {sorted(MAZE_MAPS)}, got {self.maze!r}")
+            raise InvalidValueError(f"maze must be one of {sorted(MAZE_MAPS)}, got {self.maze!r}")
         for name, cell in (("start_cell", self.start_cell), ("goal_cell", self.goal_cell)):
             if not self.layout.is_free_cell(cell):
-                raise ValueError(f"{name} {cell} is not a free cell of the {self.maze!r} maze")
+                raise InvalidValueError(f"{name} {cell} is not a free cell of the {self.maze!r} maze")
 
     @property
     def maze_map(self) -> list[list[int]]:
@@ -68,7 +69,7 @@ class MazeTask:
 
     @property
     def layout(self) -> MazeLayout:
-        """The layout at the MuJoCo mazes' scale, for :class:`~torchrl_causal.envs.MazePlanner`."""
+        """The layout at the MuJoCo mazes' scale, for :class:`~torchrl_causal.experts.MazePlanner`."""
         return MazeLayout(self.maze_map, cell_size=MAZE_SIZE_SCALING)
 
 
@@ -108,14 +109,14 @@ class OffscreenRenderer:
     def __init__(self, model: mujoco.MjModel, *, width: int, height: int) -> None:
         limit = (model.vis.global_.offwidth, model.vis.global_.offheight)
         if not (0 < width <= limit[0] and 0 < height <= limit[1]):
-            raise ValueError(f"frame size {width}x{height} must be positive and at most {limit[0]}x{limit[1]}")
+            raise InvalidValueError(f"frame size {width}x{height} must be positive and at most {limit[0]}x{limit[1]}")
         self.width, self.height = width, height
         try:
             self._context = _gl_context_class()(width, height)
             self._context.make_current()
             self._mjr = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
         except Exception as err:  # ImportError, RuntimeError or mujoco.FatalError, by backend
-            raise RuntimeError(
+            raise InvalidStateError(
                 f"offscreen rendering is unavailable (MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}): {err}. "
                 "Headless Linux needs EGL (Debian: libegl1 libegl-mesa0 libgl1-mesa-dri) or "
                 "MUJOCO_GL=osmesa (Debian: libosmesa6)."
@@ -164,9 +165,9 @@ class BatchedSimulation:
 
     def __init__(self, model: mujoco.MjModel, *, num_envs: int, frame_skip: int, pushed_body: str = "torso") -> None:
         if num_envs < 1:
-            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+            raise InvalidValueError(f"num_envs must be >= 1, got {num_envs}")
         if frame_skip < 1:
-            raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
+            raise InvalidValueError(f"frame_skip must be >= 1, got {frame_skip}")
         self.frame_skip = frame_skip
         self.model = model
         self.datas = [mujoco.MjData(model) for _ in range(num_envs)]
@@ -290,7 +291,7 @@ class MazeSimulator(BatchedSimulation):
         camera_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_CAMERA, name)
         if camera_id < 0:
             cameras = [self.model.camera(i).name for i in range(self.model.ncam)]
-            raise ValueError(f"camera {name!r} is not in the model; it has {cameras}")
+            raise InvalidValueError(f"camera {name!r} is not in the model; it has {cameras}")
         camera = mujoco.MjvCamera()
         camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
         camera.fixedcamid = camera_id
@@ -368,13 +369,13 @@ class MujocoMazeEnv(GustConfoundedEnv):
         success_radius: float | None = None,
     ) -> None:
         if maze not in self.tasks:
-            raise ValueError(f"maze must be one of {tuple(self.tasks)}, got {maze!r}")
+            raise InvalidValueError(f"maze must be one of {tuple(self.tasks)}, got {maze!r}")
         self.maze = maze
         self.task = self.tasks[maze]
         self.layout = self.task.layout
         self.success_radius = float(self.default_success_radius if success_radius is None else success_radius)
         if not self.success_radius > 0:
-            raise ValueError(f"success_radius must be > 0, got {success_radius!r}")
+            raise InvalidValueError(f"success_radius must be > 0, got {success_radius!r}")
         shape = (batch_size,) if isinstance(batch_size, int) else tuple(batch_size)
         self.simulator = MazeSimulator(
             self.agent_xml,

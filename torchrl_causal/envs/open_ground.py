@@ -14,56 +14,20 @@ and ``"xy"``, the torso position, for evaluation (neither is in the observation)
 from __future__ import annotations
 
 import math
-import pathlib
 from abc import abstractmethod
 from collections.abc import Sequence
 
 import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
-from torch import nn
 from torchrl.data import Binary, Bounded, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from torchrl_causal.envs.base import GustProcess
 from torchrl_causal.envs.mujoco_maze import BatchedSimulation
+from torchrl_causal.errors import InvalidValueError
 
-__all__ = ["DirectionalLocomotionEnv", "load_skill_network", "make_skill_network", "root_heading"]
-
-
-def make_skill_network(observation_dim: int, action_dim: int, hidden: int = 256) -> nn.Sequential:
-    """A skill's policy body: ``observation -> (pre-tanh mean, log-std)``, each ``action_dim`` wide.
-
-    Two hidden ReLU layers of ``hidden`` units (OGBench's 2 x 256 SAC networks).
-
-    Examples:
-        >>> make_skill_network(69, 21)(torch.zeros(3, 69)).shape
-        torch.Size([3, 42])
-    """
-    return nn.Sequential(
-        nn.Linear(observation_dim, hidden),
-        nn.ReLU(),
-        nn.Linear(hidden, hidden),
-        nn.ReLU(),
-        nn.Linear(hidden, 2 * action_dim),
-    )
-
-
-def load_skill_network(path: str | pathlib.Path, network: nn.Module, *, regenerate: str) -> nn.Module:
-    """``network`` with the state dict at ``path`` (``torch.load(..., weights_only=True)``), in eval mode.
-
-    Raises:
-        FileNotFoundError: naming ``regenerate``, the command that makes the weights.
-        RuntimeError: when the file is not a state dict of ``network``'s architecture.
-    """
-    path = pathlib.Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no skill weights at {path}; regenerate them with `{regenerate}`")
-    try:
-        network.load_state_dict(torch.load(path, map_location="cpu", weights_only=True))
-    except Exception as err:  # a truncated file, a foreign pickle or a different architecture
-        raise RuntimeError(f"{path} is not a valid state dict of this skill network: {err}") from err
-    return network.eval()
+__all__ = ["DirectionalLocomotionEnv", "root_heading"]
 
 
 def root_heading(qpos: np.ndarray) -> np.ndarray:
@@ -116,11 +80,11 @@ class DirectionalLocomotionEnv(EnvBase):
     ) -> None:
         n = simulation.num_envs
         if not 0 <= command_spread <= math.pi:
-            raise ValueError(f"command_spread must lie in [0, pi], got {command_spread}")
+            raise InvalidValueError(f"command_spread must lie in [0, pi], got {command_spread}")
         self.command_spread = float(command_spread)
         low, high = (direction_period, direction_period) if isinstance(direction_period, int) else direction_period
         if horizon < 1 or not 1 <= low <= high:
-            raise ValueError(f"need horizon >= 1 and 1 <= direction_period, got {horizon}, {direction_period!r}")
+            raise InvalidValueError(f"need horizon >= 1 and 1 <= direction_period, got {horizon}, {direction_period!r}")
         super().__init__(batch_size=torch.Size([n]), device="cpu")
         self.simulation = simulation
         self.horizon, self.direction_period = horizon, direction_period
@@ -149,7 +113,7 @@ class DirectionalLocomotionEnv(EnvBase):
         """The number of simulations of a one-dimensional ``batch_size``; anything else is refused."""
         shape = (batch_size,) if isinstance(batch_size, int) else tuple(batch_size)
         if len(shape) != 1 or shape[0] < 1:
-            raise ValueError(f"batch_size must be one positive dimension, got {batch_size!r}")
+            raise InvalidValueError(f"batch_size must be one positive dimension, got {batch_size!r}")
         return shape[0]
 
     # -- subclass hooks ------------------------------------------------------------------

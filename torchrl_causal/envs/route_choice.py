@@ -25,6 +25,7 @@ import torch
 from torchrl.data import Binary
 
 from torchrl_causal.envs.base import ConfoundedEnv
+from torchrl_causal.errors import InvalidValueError
 
 if TYPE_CHECKING:
     from torchrl_causal.graphs import TimeSliceTemplate
@@ -78,13 +79,13 @@ def route_choice_value(policy: RouteChoicePolicy, wind_probability: Probability)
     """
     wind = _as_fraction(wind_probability)
     if not 0 <= wind <= 1:
-        raise ValueError(f"wind_probability must lie in [0, 1], got {wind_probability!r}")
+        raise InvalidValueError(f"wind_probability must lie in [0, 1], got {wind_probability!r}")
     value = Fraction(0)
     for z, o, u in product((0, 1), repeat=3):
         weight = _bernoulli(GOAL_SIDE_PROBABILITY, z) * _bernoulli(ORIENTATION_PROBABILITY, o) * _bernoulli(wind, u)
         p_one = _as_fraction(policy(z, o, o ^ u))
         if not 0 <= p_one <= 1:
-            raise ValueError(f"policy(z={z}, o={o}, w={o ^ u}) must be a probability, got {p_one}")
+            raise InvalidValueError(f"policy(z={z}, o={o}, w={o ^ u}) must be a probability, got {p_one}")
         value += weight * (p_one * _success_probability(1 ^ z, u) + (1 - p_one) * _success_probability(z, u))
     return value
 
@@ -118,7 +119,7 @@ class RouteChoiceEnv(ConfoundedEnv):
 
     def __init__(self, *, horizon: int = 1, **kwargs) -> None:
         if horizon != 1:
-            raise ValueError(f"RouteChoiceEnv is single-stage: horizon must be 1, got {horizon!r}")
+            raise InvalidValueError(f"RouteChoiceEnv is single-stage: horizon must be 1, got {horizon!r}")
         super().__init__(horizon=horizon, **kwargs)
 
     @property

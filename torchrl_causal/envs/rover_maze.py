@@ -23,7 +23,7 @@ reset says where the rover faces.
 
 Tasks (``(row, col)`` cells of the gymnasium-robotics maps, cell size 1, start position
 jittered by up to 0.1 in each axis): ``u``: (1, 1) → (3, 1); ``medium``: (1, 1) → (6, 6);
-``large``: (7, 1) → (7, 10). With the default speeds :class:`~torchrl_causal.envs.RoverExpert`
+``large``: (7, 1) → (7, 10). With the default speeds :class:`~torchrl_causal.experts.RoverExpert`
 needs about 310 steps on medium and 640 on large (see ``results/rover_speed.md``).
 """
 
@@ -38,7 +38,8 @@ import torch
 from torchrl.data import Bounded, Unbounded
 
 from torchrl_causal.envs.base import GustConfoundedEnv
-from torchrl_causal.envs.planner import MazeLayout
+from torchrl_causal.envs.maze_layout import MazeLayout
+from torchrl_causal.errors import InvalidValueError
 
 if TYPE_CHECKING:
     from torchrl_causal.graphs import TimeSliceTemplate
@@ -78,11 +79,11 @@ class RoverParameters:
 
     def __post_init__(self) -> None:
         if not 0 < self.half_size < 0.5:
-            raise ValueError(f"half_size must lie in (0, 0.5) cells, got {self.half_size}")
+            raise InvalidValueError(f"half_size must lie in (0, 0.5) cells, got {self.half_size}")
         # A step longer than the free gap between two walls could jump over a wall cell.
         longest_step = self.max_speed + self.gust_push * 5.0
         if longest_step >= 1 - 2 * self.half_size:
-            raise ValueError(f"a step of up to {longest_step:.3f} cells could tunnel through walls")
+            raise InvalidValueError(f"a step of up to {longest_step:.3f} cells could tunnel through walls")
 
 
 def _wrap_angle(angle: torch.Tensor) -> torch.Tensor:
@@ -165,7 +166,7 @@ class RoverMazeEnv(GustConfoundedEnv):
 
     def __init__(self, maze: str = "medium", *, horizon: int = 1000, params: RoverParameters | None = None, **kwargs) -> None:
         if maze not in ROVER_TASKS:
-            raise ValueError(f"unknown maze {maze!r}; expected one of {sorted(ROVER_TASKS)}")
+            raise InvalidValueError(f"unknown maze {maze!r}; expected one of {sorted(ROVER_TASKS)}")
         self.maze = maze
         self.params = RoverParameters() if params is None else params
         self.layout = MazeLayout.from_name(maze)

@@ -19,10 +19,10 @@ from tensordict.nn import TensorDictModuleBase
 from torchrl.envs import EnvBase
 
 from torchrl_causal.evaluation.metrics import EvaluationResult, Policy, evaluate_policy
-from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.experiment.builders import make_env, make_expert, make_imitator_env, make_policy
 from torchrl_causal.experiment.device import for_cpu_env, resolve_device
 from torchrl_causal.experiment.run_directory import CheckpointError, RunDirectory
+from torchrl_causal.graphs.window import AdjustmentWindow
 
 __all__ = ["Evaluator", "maze_geometry", "PERIODIC_EVAL_SEED", "FINAL_EVAL_SEED"]
 

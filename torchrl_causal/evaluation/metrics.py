@@ -19,6 +19,7 @@ from tensordict import TensorDictBase
 from torchrl.envs import EnvBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
+from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.progress import progress as progress_reporter
 
 __all__ = ["EvaluationResult", "evaluate_policy"]
@@ -69,7 +70,7 @@ class EvaluationResult:
     def __post_init__(self) -> None:
         sizes = {len(self.successes), len(self.returns), len(self.lengths)}
         if len(sizes) != 1:
-            raise ValueError(
+            raise InvalidValueError(
                 f"successes, returns and lengths must have one entry per episode, got sizes "
                 f"{len(self.successes)}, {len(self.returns)}, {len(self.lengths)}"
             )
@@ -137,7 +138,7 @@ class EvaluationResult:
     def from_dict(cls, data: Mapping[str, Any]) -> EvaluationResult:
         missing = {"regime", "successes", "returns", "lengths"} - set(data)
         if missing:
-            raise ValueError(f"evaluation record lacks {sorted(missing)}")
+            raise InvalidValueError(f"evaluation record lacks {sorted(missing)}")
         return cls(
             regime=data["regime"],
             successes=data["successes"],
@@ -159,10 +160,10 @@ class EvaluationResult:
             (0.5, -5.0, (0, 1))
         """
         if not results:
-            raise ValueError("cannot pool an empty list of evaluation results")
+            raise InvalidValueError("cannot pool an empty list of evaluation results")
         regimes = {r.regime for r in results}
         if len(regimes) != 1:
-            raise ValueError(f"cannot pool results of different regimes {sorted(regimes)}")
+            raise InvalidValueError(f"cannot pool results of different regimes {sorted(regimes)}")
         return cls(
             regime=results[0].regime,
             successes=[s for r in results for s in r.successes],
@@ -214,9 +215,9 @@ def evaluate_policy(
         (2000, True)
     """
     if episodes < 1:
-        raise ValueError(f"episodes must be >= 1, got {episodes}")
+        raise InvalidValueError(f"episodes must be >= 1, got {episodes}")
     if len(env.batch_size) != 1:
-        raise ValueError(f"evaluate_policy needs an env with a 1-D batch, got batch_size {tuple(env.batch_size)}")
+        raise InvalidValueError(f"evaluate_policy needs an env with a 1-D batch, got batch_size {tuple(env.batch_size)}")
     width = env.batch_size[0]
     successes: list[bool] = []
     returns: list[float] = []

@@ -14,6 +14,7 @@ matplotlib.use("Agg")  # reports are written on headless machines
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
+from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.evaluation.metrics import EvaluationResult  # noqa: E402
 from torchrl_causal.evaluation.runs import RunRecord, Setting, mean_curve  # noqa: E402
 from torchrl_causal.evaluation.tables import display_name, ordered_labels  # noqa: E402
@@ -126,7 +127,7 @@ def plot_ablation(
     no two settings differ in ``axis`` alone.
     """
     if axis not in ABLATION_AXES:
-        raise ValueError(f"unknown ablation axis {axis!r}; expected one of {sorted(ABLATION_AXES)}")
+        raise InvalidValueError(f"unknown ablation axis {axis!r}; expected one of {sorted(ABLATION_AXES)}")
     groups: dict[tuple, list[Setting]] = defaultdict(list)
     for setting in aggregated:
         groups[tuple(v for f, v in setting._asdict().items() if f != axis)].append(setting)

@@ -17,13 +17,14 @@ import torch  # noqa: E402
 from torchrl.envs import EnvBase, TransformedEnv  # noqa: E402
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp  # noqa: E402
 
+from torchrl_causal.errors import InvalidValueError, TorchRLCausalError
 from torchrl_causal.evaluation.metrics import Policy  # noqa: E402
 
 __all__ = ["EpisodeOutcome", "Filmstrip", "RenderingUnavailable", "record_filmstrip", "rendered_episode", "save_filmstrips"]
 
 
-class RenderingUnavailable(TypeError):
-    """The env draws no frames (it is not a MuJoCo scene)."""
+class RenderingUnavailable(TorchRLCausalError, TypeError):
+    """The env draws no frames (it is not a MuJoCo scene); a ``TypeError`` too, as it always was."""
 
 
 @dataclass(frozen=True)
@@ -88,9 +89,9 @@ def rendered_episode(
             on the whole maze).
     """
     if tuple(env.batch_size) != (1,):
-        raise ValueError(f"recording needs an env with batch size (1,), got {tuple(env.batch_size)}")
+        raise InvalidValueError(f"recording needs an env with batch size (1,), got {tuple(env.batch_size)}")
     if every < 1 or max_steps < 1:
-        raise ValueError(f"need every >= 1 and max_steps >= 1, got {every}, {max_steps}")
+        raise InvalidValueError(f"need every >= 1 and max_steps >= 1, got {every}, {max_steps}")
     scene = _renderable(env)
     outcome = EpisodeOutcome() if outcome is None else outcome
 
@@ -132,14 +133,15 @@ def record_filmstrip(
         every: a candidate frame is rendered every this many steps (and at the end).
 
     Examples:
-        >>> from torchrl_causal.envs import AntMazeEnv, AntMazeExpert
+        >>> from torchrl_causal.envs import AntMazeEnv
+        >>> from torchrl_causal.experts import AntMazeExpert
         >>> env = AntMazeEnv(maze="medium", regime="deploy", batch_size=[1], seed=0)
         >>> strip = record_filmstrip(env, AntMazeExpert(env), max_steps=30, frames=3, every=10, width=32, height=32)
         >>> strip.steps, strip.frames[0].shape, strip.length
         ((0, 20, 30), (32, 32, 3), 30)
     """
     if frames < 2:
-        raise ValueError(f"need frames >= 2, got {frames}")
+        raise InvalidValueError(f"need frames >= 2, got {frames}")
     outcome = EpisodeOutcome()
     steps, candidates = zip(
         *rendered_episode(env, policy, max_steps=max_steps, every=every, width=width, height=height, camera=camera, outcome=outcome)
@@ -151,7 +153,7 @@ def record_filmstrip(
 def save_filmstrips(strips: dict[str, Filmstrip], path: str | Path) -> Path:
     """One row of frames per labelled strip, each frame titled with its step."""
     if not strips:
-        raise ValueError("save_filmstrips needs at least one strip")
+        raise InvalidValueError("save_filmstrips needs at least one strip")
     columns = max(len(strip.frames) for strip in strips.values())
     fig, axes = plt.subplots(len(strips), columns, figsize=(2.2 * columns, 2.4 * len(strips)), squeeze=False)
     for row, (label, strip) in zip(axes, strips.items()):

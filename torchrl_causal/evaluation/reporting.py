@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace  # noqa: F401  (the docstring 
 from pathlib import Path
 from typing import Any
 
+from torchrl_causal.errors import ExistingFileError, MissingFileError
 from torchrl_causal.evaluation.plots import ABLATION_AXES, plot_ablation, plot_training_curves, plot_trajectories
 from torchrl_causal.evaluation.runs import RunRecord, Setting, load_runs
 from torchrl_causal.evaluation.tables import (
@@ -96,14 +97,14 @@ def notes_to_keep(path: str | Path) -> str:
         >>> notes_to_keep(md)  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        FileExistsError: .../r.md has no notes markers ...
+        torchrl_causal.errors.ExistingFileError: .../r.md has no notes markers ...
     """
     path = Path(path)
     if not path.exists():
         return f"{NOTES_BEGIN}\n{NOTES_END}"
     notes = kept_notes(path)
     if not notes:
-        raise FileExistsError(
+        raise ExistingFileError(
             f"{path} has no notes markers ({NOTES_BEGIN} ... {NOTES_END}), so regenerating it would delete any text "
             "written in it by hand: move that text between the two markers (or delete the file, or write elsewhere "
             "with out= / name=), then rerun"
@@ -211,7 +212,7 @@ def write_report(
     roots = [Path(runs_root)] if isinstance(runs_root, (str, Path)) else [Path(root) for root in runs_root]
     runs = load_runs(roots)
     if not runs:
-        raise FileNotFoundError(f"no evaluated runs below {', '.join(map(str, roots))} (expected */config.yaml with eval/*.json)")
+        raise MissingFileError(f"no evaluated runs below {', '.join(map(str, roots))} (expected */config.yaml with eval/*.json)")
     out_dir = Path(out_dir) if out_dir is not None else roots[0] / "report"
     envs = sorted({run.setting.env for run in runs})
     name = name or (envs[0] if len(envs) == 1 else "report")

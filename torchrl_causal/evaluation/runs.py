@@ -19,14 +19,15 @@ from typing import Any, NamedTuple
 
 from omegaconf import OmegaConf
 
+from torchrl_causal.errors import InvalidValueError, MissingFileError
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.experiment.run_directory import (
     CONFIG_FILE,
-    copy_folders,
     CheckpointError,
     RunDirectory,
     atomic_save,
     atomic_write_text,
+    copy_folders,
     run_label,
 )
 
@@ -106,7 +107,7 @@ def load_run(run_dir: str | Path) -> RunRecord:
     cfg = run.read_config()
     for key in ("env.name", "env.horizon", "env.confounding_strength", "window.k", "algo.name", "causal", "seed"):
         if OmegaConf.select(cfg, key) is None:
-            raise ValueError(f"{run.config_file} lacks the key {key!r}")
+            raise InvalidValueError(f"{run.config_file} lacks the key {key!r}")
     evaluations: dict[str, EvaluationResult] = {}
     maze = None
     for path in (run.eval_path(regime) for regime in ("train", "deploy")):
@@ -150,17 +151,17 @@ def load_runs(roots: str | Path | Iterable[str | Path]) -> list[RunRecord]:
     """
     folders = [Path(roots)] if isinstance(roots, (str, Path)) else [Path(root) for root in roots]
     if not folders:
-        raise ValueError("load_runs needs at least one runs folder")
+        raise InvalidValueError("load_runs needs at least one runs folder")
     records: list[RunRecord] = []
     first_path: dict[tuple[Setting, str, int], Path] = {}
     for folder in folders:
         if not folder.exists():
-            raise FileNotFoundError(f"runs folder {folder} does not exist")
+            raise MissingFileError(f"runs folder {folder} does not exist")
         for run in _complete_runs(folder):
             record = load_run(run.path)
             key = (record.setting, record.label, record.seed)
             if key in first_path:
-                raise ValueError(
+                raise InvalidValueError(
                     f"{first_path[key]} and {record.path} are both {record.label} seed {record.seed} "
                     f"on {record.setting.describe()}: a report would pool them as two seeds; "
                     "point runs= at the run roots that hold each run once"

@@ -22,6 +22,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from torchrl_causal.errors import InvalidValueError
+
 __all__ = ["bootstrap_interval", "interquartile_mean"]
 
 # Largest number of distinct resamples (multisets, C(2n - 1, n)) enumerated exactly:
@@ -39,7 +41,7 @@ def interquartile_mean(values: Sequence[float]) -> float:
         0.5
     """
     if not len(values):
-        raise ValueError("interquartile_mean needs at least one value")
+        raise InvalidValueError("interquartile_mean needs at least one value")
     ordered = sorted(values)
     cut = len(ordered) // 4
     kept = ordered[cut : len(ordered) - cut]
@@ -107,9 +109,9 @@ def bootstrap_interval(
         True
     """
     if not len(values):
-        raise ValueError("bootstrap_interval needs at least one value")
+        raise InvalidValueError("bootstrap_interval needs at least one value")
     if not 0 < confidence < 1:
-        raise ValueError(f"confidence must be in (0, 1), got {confidence}")
+        raise InvalidValueError(f"confidence must be in (0, 1), got {confidence}")
     n = len(values)
     tail = (1 - confidence) / 2
     if exact is None:

@@ -17,7 +17,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from torchrl_causal.algorithms import Row, TABLE1_ROWS
+from torchrl_causal.algorithms import TABLE1_ROWS, Row
+from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.evaluation.runs import RunRecord, Setting
 from torchrl_causal.evaluation.seed_statistics import bootstrap_interval, interquartile_mean
@@ -140,7 +141,7 @@ def read_reported_rows(path: str | Path) -> dict[Setting, dict[str, dict[str, Re
         reader = csv.DictReader(handle)
         missing = {"env", "horizon", "strength", "k", *CSV_COLUMNS} - set(reader.fieldnames or ())
         if missing:
-            raise ValueError(f"{path} is not a report's _all.csv: it lacks the column(s) {sorted(missing)}")
+            raise InvalidValueError(f"{path} is not a report's _all.csv: it lacks the column(s) {sorted(missing)}")
         table: dict[Setting, dict[str, dict[str, ReportedResult]]] = defaultdict(lambda: defaultdict(dict))
         for row in reader:
             setting = Setting(row["env"], int(row["horizon"]), float(row["strength"]), int(row["k"]))
@@ -302,7 +303,7 @@ def seed_spread(values: Sequence[float]) -> tuple[float, float]:
     """
     n = len(values)
     if not n:
-        raise ValueError("seed_spread needs at least one value")
+        raise InvalidValueError("seed_spread needs at least one value")
     mean = math.fsum(values) / n
     if n == 1:
         return mean, math.nan
@@ -411,11 +412,11 @@ class EffectTargets:
         >>> EffectTargets(causal_fraction=-1)
         Traceback (most recent call last):
         ...
-        ValueError: EffectTargets' thresholds must be finite and >= 0, got causal_fraction=-1
+        torchrl_causal.errors.InvalidValueError: EffectTargets' thresholds must be finite and >= 0, got causal_fraction=-1
         >>> EffectTargets(causal_fraction=2)  # no method keeps twice the expert's success
         Traceback (most recent call last):
         ...
-        ValueError: EffectTargets' causal_fraction is a fraction of the expert's success, in [0, 1], got 2
+        torchrl_causal.errors.InvalidValueError: EffectTargets' causal_fraction is a fraction of the expert's success, in [0, 1], got 2
     """
 
     causal_fraction: float = 0.8
@@ -426,10 +427,12 @@ class EffectTargets:
         for name in ("causal_fraction", "non_causal_fraction", "train_gap_points"):
             value = getattr(self, name)
             if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise ValueError(f"EffectTargets' thresholds must be finite and >= 0, got {name}={value!r}")
+                raise InvalidValueError(f"EffectTargets' thresholds must be finite and >= 0, got {name}={value!r}")
         for name in ("causal_fraction", "non_causal_fraction"):
             if getattr(self, name) > 1:
-                raise ValueError(f"EffectTargets' {name} is a fraction of the expert's success, in [0, 1], got {getattr(self, name)!r}")
+                raise InvalidValueError(
+                    f"EffectTargets' {name} is a fraction of the expert's success, in [0, 1], got {getattr(self, name)!r}"
+                )
 
 
 def effect_checks(table: Table, targets: EffectTargets = EffectTargets()) -> list[EffectCheck]:

@@ -18,8 +18,9 @@ from tensordict import TensorDict
 from torchrl.envs import EnvBase
 from torchrl.record import VideoRecorder
 
-from torchrl_causal.evaluation.rendering import EpisodeOutcome, rendered_episode
+from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.evaluation.metrics import Policy
+from torchrl_causal.evaluation.rendering import EpisodeOutcome, rendered_episode
 from torchrl_causal.extras import require_extra
 
 __all__ = ["VIDEO_FORMATS", "VideoFile", "RecordedVideo", "record_video"]
@@ -47,9 +48,9 @@ class VideoFile:
     def __init__(self, path: str | Path, fps: int = 30) -> None:
         self.path = Path(path)
         if self.path.suffix.lstrip(".") not in VIDEO_FORMATS:
-            raise ValueError(f"video file {self.path} must end in one of {['.' + f for f in VIDEO_FORMATS]}")
+            raise InvalidValueError(f"video file {self.path} must end in one of {['.' + f for f in VIDEO_FORMATS]}")
         if fps < 1:
-            raise ValueError(f"fps must be >= 1, got {fps}")
+            raise InvalidValueError(f"fps must be >= 1, got {fps}")
         self.fps = fps
 
     def log_video(self, name: str, video: torch.Tensor, step: int | None = None, *, fps: float | None = None, **kwargs: object) -> None:
@@ -74,7 +75,7 @@ def _write_mp4(path: Path, frames: np.ndarray, fps: int, crf: int = 17) -> None:
     av = require_extra("writing MP4 videos", "av")
     height, width = frames.shape[1:3]
     if height % 2 or width % 2:
-        raise ValueError(f"an MP4 needs an even width and height, got {width}x{height}")
+        raise InvalidValueError(f"an MP4 needs an even width and height, got {width}x{height}")
     with av.open(str(path), "w") as container:
         stream = container.add_stream("libx264", rate=fps, options={"crf": str(crf)})
         stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
@@ -113,7 +114,8 @@ def record_video(
 
     Examples:
         >>> import tempfile
-        >>> from torchrl_causal.envs import AntMazeEnv, AntMazeExpert
+        >>> from torchrl_causal.envs import AntMazeEnv
+        >>> from torchrl_causal.experts import AntMazeExpert
         >>> env = AntMazeEnv(maze="medium", regime="deploy", batch_size=[1], seed=0)
         >>> video = record_video(env, AntMazeExpert(env), Path(tempfile.mkdtemp()) / "ant.gif", max_steps=8,
         ...                      every=4, width=16, height=16)

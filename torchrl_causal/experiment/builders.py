@@ -21,9 +21,10 @@ from tensordict.nn import TensorDictModuleBase
 from torchrl.data import Binary, Bounded, Composite, TensorSpec
 from torchrl.envs import EnvBase, Transform, TransformedEnv
 
-from torchrl_causal.graphs.window import AdjustmentWindow
+from torchrl_causal.errors import InvalidTypeError
 from torchrl_causal.experiment.schema import ConfigValueError, WindowMode
 from torchrl_causal.graphs.template import TimeSliceTemplate
+from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.transforms import CausalWindowTransform, causal_template, imitator_window
 
 __all__ = [
@@ -84,7 +85,7 @@ class RelaxedBinaryAction(Transform):
                 action_spec[key] = self.transform_action_spec(action_spec[key])
             return action_spec
         if not isinstance(action_spec, Binary):
-            raise TypeError(f"RelaxedBinaryAction expects a Binary action spec, got {type(action_spec).__name__}")
+            raise InvalidTypeError(f"RelaxedBinaryAction expects a Binary action spec, got {type(action_spec).__name__}")
         return Bounded(0.0, 1.0, shape=action_spec.shape, device=action_spec.device, dtype=torch.float32)
 
 

@@ -28,6 +28,7 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from torchrl_causal.algorithms import ROW_SETS, row_names
+from torchrl_causal.errors import InvalidValueError, MissingFileError
 from torchrl_causal.experiment.run_directory import run_label
 from torchrl_causal.experiment.schema import register_configs
 
@@ -72,7 +73,7 @@ def rows(which: str) -> str:
         'expert,c_bc,c_gail,c_sqil,c_iq_learn,bc,gail,sqil,iq_learn'
     """
     if which not in ROW_SETS:
-        raise ValueError(f"${{rows:{which}}}: no such row set; use one of {sorted(ROW_SETS)}")
+        raise InvalidValueError(f"${{rows:{which}}}: no such row set; use one of {sorted(ROW_SETS)}")
     return row_names(ROW_SETS[which])
 
 
@@ -101,7 +102,7 @@ def compose_config(overrides: Sequence[str] = ()) -> DictConfig:
     from hydra import compose, initialize_config_module
 
     if not (CONFIG_DIR / f"{CONFIG_NAME}.yaml").is_file():
-        raise FileNotFoundError(f"Hydra config tree not found at {CONFIG_DIR}: the package was installed without its data")
+        raise MissingFileError(f"Hydra config tree not found at {CONFIG_DIR}: the package was installed without its data")
     register_resolvers()
     with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3"):
         return compose(config_name=CONFIG_NAME, overrides=list(overrides))

@@ -21,6 +21,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.compat import dynamo_supported
+from torchrl_causal.errors import InvalidValueError
 
 __all__ = ["DeviceCheck", "PolicyOnDevice", "compile_unavailable", "for_cpu_env", "resolve_device"]
 
@@ -74,17 +75,17 @@ def resolve_device(spec: str | torch.device) -> torch.device:
         >>> resolve_device("gpu")
         Traceback (most recent call last):
         ...
-        ValueError: device='gpu' is not a device name: use cpu, cuda, cuda:N, mps or auto
+        torchrl_causal.errors.InvalidValueError: device='gpu' is not a device name: use cpu, cuda, cuda:N, mps or auto
     """
     if isinstance(spec, str) and spec.strip().lower() == "auto":
         return torch.device("cuda", 0) if torch.cuda.is_available() else CPU
     try:
         device = torch.device(spec)
     except (RuntimeError, TypeError) as err:
-        raise ValueError(f"device={spec!r} is not a device name: use cpu, cuda, cuda:N, mps or auto") from err
+        raise InvalidValueError(f"device={spec!r} is not a device name: use cpu, cuda, cuda:N, mps or auto") from err
     problem = _available(device)
     if problem is not None:
-        raise ValueError(
+        raise InvalidValueError(
             f"device={spec!r} cannot be used here: {problem}. Use device=cpu, or device=auto to take a GPU only when one is present."
         )
     if device.type == "cuda" and device.index is None:
@@ -97,7 +98,7 @@ class DeviceCheck(Callback):
     the sweep folder.
 
     A single run needs no callback: it writes nothing before
-    :func:`~torchrl_causal.trainers.validate_config`, which checks the device. A
+    :func:`~torchrl_causal.experiment.schema.validate_config`, which checks the device. A
     multirun's launcher creates the sweep folder (``run_root``, for ``multirun.yaml``)
     before any job starts, so ``device=`` is checked here, at ``on_multirun_start``, and
     the process exits with the error (Hydra turns a callback's exceptions into warnings,

@@ -32,8 +32,8 @@ import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-import torch  # noqa: F401  (the docstring examples use it)
 
+import torch  # noqa: F401  (the docstring examples use it)
 from omegaconf import DictConfig, OmegaConf
 from torchrl.data import Composite, TensorSpec
 

@@ -18,9 +18,9 @@ import hashlib
 import os
 import platform
 import sys
+from collections.abc import Mapping
 from functools import cache
 from importlib import metadata
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 

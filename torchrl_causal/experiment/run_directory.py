@@ -43,10 +43,10 @@ from pathlib import Path
 from typing import Any, cast
 
 import torch
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from torchrl_causal.algorithms import Row
-from torchrl_causal.errors import TorchRLCausalError
+from torchrl_causal.errors import InvalidValueError, MissingFileError, TorchRLCausalError
 
 __all__ = [
     "CONFIG_FILE",
@@ -68,6 +68,7 @@ __all__ = [
     "carry_runs",
     "copy_folders",
     "MOVED_KEYS",
+    "MOVED_TARGETS",
     "changed_keys",
     "load_checkpoint",
     "migrate_config",
@@ -114,11 +115,27 @@ MOVED_KEYS: dict[str, str] = {
     "env.window_k": "env.paper.window_k",
 }
 
+#: ``{old dotted path: new dotted path}`` of the code a config names (``_target_``) that moved:
+#: the experts left ``envs`` for ``experts``. The old paths still import (archived configs load
+#: as they are); :func:`migrate_config` writes the new ones, so a run that a config with the old
+#: path started resumes under the shipped config that names the new one.
+MOVED_TARGETS: dict[str, str] = {
+    **{f"torchrl_causal.envs.{name}": f"torchrl_causal.experts.{name}" for name in ("AntMazeExpert", "HumanoidMazeExpert", "RoverExpert")},
+    **{
+        f"torchrl_causal.envs.experts.{name}": f"torchrl_causal.experts.{name}"
+        for name in ("AntMazeExpert", "HumanoidMazeExpert", "RouteChoiceExpert", "RoverExpert")
+    },
+    "torchrl_causal.envs.RouteChoiceExpert": "torchrl_causal.experts.RouteChoiceExpert",
+}
 
-def migrate_config(config: DictConfig, moved: Mapping[str, str] = MOVED_KEYS) -> DictConfig:
-    """``config`` with each key of ``moved`` renamed to its new place (in place; a config
-    without the old key is left as it is). The old key's value wins over one already at the
-    new place: it is the value the run used.
+
+def migrate_config(
+    config: DictConfig, moved: Mapping[str, str] = MOVED_KEYS, moved_targets: Mapping[str, str] = MOVED_TARGETS
+) -> DictConfig:
+    """``config`` with each key of ``moved`` renamed to its new place and each ``_target_``
+    of ``moved_targets`` replaced by its new path (in place; a config without them is left as
+    it is). The old key's value wins over one already at the new place: it is the value the
+    run used.
 
     Examples:
         >>> old = OmegaConf.create({"env": {"window_k": 0, "paper": {"window_k": 10}}, "window": {"k": 0}})
@@ -126,6 +143,9 @@ def migrate_config(config: DictConfig, moved: Mapping[str, str] = MOVED_KEYS) ->
         {'env': {'paper': {'window_k': 0}}, 'window': {'k': 0}}
         >>> OmegaConf.to_container(migrate_config(OmegaConf.create({"env": {"paper": {"window_k": 2}}})))
         {'env': {'paper': {'window_k': 2}}}
+        >>> old = OmegaConf.create({"env": {"expert": {"_target_": "torchrl_causal.envs.AntMazeExpert", "lookahead": 3}}})
+        >>> OmegaConf.to_container(migrate_config(old))
+        {'env': {'expert': {'_target_': 'torchrl_causal.experts.AntMazeExpert', 'lookahead': 3}}}
     """
     for old, new in moved.items():
         parent_key, _, leaf = old.rpartition(".")
@@ -134,7 +154,21 @@ def migrate_config(config: DictConfig, moved: Mapping[str, str] = MOVED_KEYS) ->
             value = parent[leaf]
             del parent[leaf]
             OmegaConf.update(config, new, value, merge=False, force_add=True)
+    _rename_targets(config, moved_targets)
     return config
+
+
+def _rename_targets(node: object, moved: Mapping[str, str]) -> None:
+    """Replaces, in place, every ``_target_`` of the config tree ``node`` that ``moved`` names."""
+    if isinstance(node, DictConfig):
+        for key, value in node.items_ex(resolve=False):
+            if key == "_target_" and isinstance(value, str) and value in moved:
+                node[key] = moved[value]
+            else:
+                _rename_targets(value, moved)
+    elif isinstance(node, ListConfig):
+        for value in node:
+            _rename_targets(value, moved)
 
 
 class CheckpointError(TorchRLCausalError, RuntimeError):
@@ -171,7 +205,7 @@ def run_label(algorithm: str, causal: bool, window_matched: bool = False, drop: 
         ('sqil_wm', 'c_bc_no-X')
     """
     if causal and window_matched and algorithm != "expert":
-        raise ValueError("window.window_matched=true is a non-causal baseline: use it with causal=false")
+        raise InvalidValueError("window.window_matched=true is a non-causal baseline: use it with causal=false")
     return Row(algorithm, causal, window_matched, tuple(drop)).name
 
 
@@ -212,7 +246,7 @@ def load_checkpoint(path: Path, map_location: str | torch.device = "cpu") -> dic
     names the file. A checkpoint written on a GPU loads on a machine without one; a missing file
     is refused as missing (``FileNotFoundError``), not as corrupted."""
     if not Path(path).is_file():
-        raise FileNotFoundError(f"no checkpoint at {path}")
+        raise MissingFileError(f"no checkpoint at {path}")
     try:
         state = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as err:  # pickle, zip and unpickler errors all mean the same here
@@ -367,7 +401,7 @@ class RunDirectory:
             RunFileError: ``config.yaml`` does not parse.
         """
         if not self.config_file.is_file():
-            raise FileNotFoundError(f"{self.path} is not a run directory: {CONFIG_FILE} is missing")
+            raise MissingFileError(f"{self.path} is not a run directory: {CONFIG_FILE} is missing")
         try:
             config = OmegaConf.load(self.config_file)
         except Exception as error:  # YAML scanner and parser errors, OmegaConf's own
@@ -568,9 +602,9 @@ def copy_folders(root: str | Path, out: str | Path) -> tuple[Path, Path]:
     missing (``FileNotFoundError``) or one contains the other, equal folders included (``ValueError``)."""
     root, out = Path(root).resolve(), Path(out).resolve()
     if not root.exists():
-        raise FileNotFoundError(f"runs folder {root} does not exist")
+        raise MissingFileError(f"runs folder {root} does not exist")
     if out.is_relative_to(root) or root.is_relative_to(out):
-        raise ValueError(f"copy folder {out} and runs folder {root} must not contain one another")
+        raise InvalidValueError(f"copy folder {out} and runs folder {root} must not contain one another")
     return root, out
 
 

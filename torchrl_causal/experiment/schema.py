@@ -568,7 +568,7 @@ def _check_expert(cfg: DictConfig) -> None:
         raise ConfigValueError(
             f"env {cfg.env.name!r} has no expert (env.expert is null), and every algorithm needs one "
             "(demonstrations, or the expert row): name a class taking the env, e.g. "
-            "'env.expert={_target_: torchrl_causal.envs.HumanoidMazeExpert, weights: PATH}' for a humanoid skill body of your own."
+            "'env.expert={_target_: torchrl_causal.experts.HumanoidMazeExpert, weights: PATH}' for a humanoid skill body of your own."
         )
 
 

@@ -6,6 +6,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Literal
 
+from torchrl_causal.errors import InvalidTypeError
+
 from .diagram import CausalDiagram
 from .errors import GraphError
 
@@ -221,7 +223,7 @@ class TimeSliceTemplate:
         }
         unknown = set(changes) - set(fields)
         if unknown:
-            raise TypeError(f"unknown template fields {sorted(unknown)}")
+            raise InvalidTypeError(f"unknown template fields {sorted(unknown)}")
         fields.update(changes)
         return TimeSliceTemplate(**fields)  # type: ignore[arg-type]
 

@@ -12,6 +12,8 @@ from collections.abc import Hashable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from torchrl_causal.errors import InvalidValueError
+
 Node = Hashable
 
 __all__ = ["AdjustmentWindow"]
@@ -76,12 +78,12 @@ class AdjustmentWindow:
 
     def __post_init__(self) -> None:
         if not isinstance(self.k, int) or self.k < 0:
-            raise ValueError(f"window size k must be a non-negative int, got {self.k!r}")
+            raise InvalidValueError(f"window size k must be a non-negative int, got {self.k!r}")
         for var, var_lags in self.lags.items():
             if list(var_lags) != sorted(set(var_lags)) or any(lag < 0 or lag > self.k for lag in var_lags):
-                raise ValueError(f"lags of {var!r} must be strictly increasing within 0..{self.k}, got {var_lags!r}")
+                raise InvalidValueError(f"lags of {var!r} must be strictly increasing within 0..{self.k}, got {var_lags!r}")
             if var == self.action and 0 in var_lags:
-                raise ValueError(f"the action {var!r} cannot be conditioned on at lag 0 (it is being chosen)")
+                raise InvalidValueError(f"the action {var!r} cannot be conditioned on at lag 0 (it is being chosen)")
         object.__setattr__(self, "lags", {var: tuple(v) for var, v in self.lags.items()})
         object.__setattr__(self, "excluded", frozenset(self.excluded))
         object.__setattr__(self, "lags_beyond_k", tuple(tuple(edge) for edge in self.lags_beyond_k))
@@ -94,7 +96,7 @@ class AdjustmentWindow:
     def adjustment_set(self, t: int) -> frozenset[tuple[str, int]]:
         """The set ``Z_t`` as nodes ``(var, tau)``, clipped at the episode start (tau >= 0)."""
         if t < 0:
-            raise ValueError(f"timestep must be >= 0, got {t}")
+            raise InvalidValueError(f"timestep must be >= 0, got {t}")
         return frozenset((var, t - lag) for var, var_lags in self.lags.items() for lag in var_lags if t - lag >= 0)
 
     def non_causal_twin(self) -> AdjustmentWindow:
@@ -111,7 +113,7 @@ class AdjustmentWindow:
                 imitator observes).
         """
         if not self.observed:
-            raise ValueError("the non-causal twin needs window.observed to know which variables the imitator sees")
+            raise InvalidValueError("the non-causal twin needs window.observed to know which variables the imitator sees")
         state_lags = tuple(sorted({lag for var, lags in self.lags.items() if var != self.action for lag in lags}))
         action_lags = tuple(range(1, self.k + 1))
         lags = {var: action_lags if var == self.action else state_lags for var in self.observed}
@@ -154,7 +156,7 @@ class AdjustmentWindow:
             return self
         missing = sorted(dropped - set(self.lags))
         if missing:
-            raise ValueError(f"cannot drop {missing}: not in the window, whose variables are {list(self.lags)}")
+            raise InvalidValueError(f"cannot drop {missing}: not in the window, whose variables are {list(self.lags)}")
         return replace(
             self,
             lags={var: lags for var, lags in self.lags.items() if var not in dropped},
@@ -181,7 +183,7 @@ class AdjustmentWindow:
     def from_dict(cls, data: Mapping[str, Any]) -> AdjustmentWindow:
         missing = {"k", "action", "lags"} - set(data)
         if missing:
-            raise ValueError(f"adjustment window description lacks {sorted(missing)}")
+            raise InvalidValueError(f"adjustment window description lacks {sorted(missing)}")
         return cls(
             k=int(data["k"]),
             action=str(data["action"]),

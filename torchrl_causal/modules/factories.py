@@ -24,6 +24,7 @@ from torch import nn
 from torchrl.data import Bounded, Composite, TensorSpec
 from torchrl.modules import MLP, ProbabilisticActor, TanhModule, TanhNormal, ValueOperator
 
+from torchrl_causal.errors import InvalidTypeError, InvalidValueError, UnknownKeyError
 from torchrl_causal.modules.networks import ResidualMLP, SkipMLP, Standardize
 
 __all__ = [
@@ -51,7 +52,7 @@ def bounded_action_spec(action_spec: TensorSpec, action_key: NestedKey = "action
     """
     if isinstance(action_spec, Composite):
         if action_key not in action_spec.keys(True, True):
-            raise KeyError(
+            raise UnknownKeyError(
                 f"action key {action_key!r} not found in the composite action spec (keys: {list(action_spec.keys(True, True))})."
             )
         action_spec = action_spec[action_key]
@@ -61,16 +62,16 @@ def bounded_action_spec(action_spec: TensorSpec, action_key: NestedKey = "action
         torch.float32,
         torch.float64,
     ):
-        raise TypeError(
+        raise InvalidTypeError(
             f"action {action_key!r} needs a continuous Bounded spec, got {type(action_spec).__name__} with dtype {action_spec.dtype}."
         )
     low, high = action_spec.space.low, action_spec.space.high
     if not (torch.isfinite(low).all() and torch.isfinite(high).all() and (high > low).all()):
-        raise ValueError(f"action {action_key!r} needs finite bounds with high > low, got [{low}, {high}].")
+        raise InvalidValueError(f"action {action_key!r} needs finite bounds with high > low, got [{low}, {high}].")
     while action_spec.ndim > 1:
         first = action_spec[0]
         if not ((action_spec.space.low == first.space.low).all() and (action_spec.space.high == first.space.high).all()):
-            raise ValueError(f"action {action_key!r} has different bounds across its batch dimensions.")
+            raise InvalidValueError(f"action {action_key!r} has different bounds across its batch dimensions.")
         action_spec = first
     return action_spec
 

@@ -13,17 +13,19 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from torchrl_causal.errors import InvalidValueError
+
 __all__ = ["ResidualBlock", "ResidualMLP", "SkipMLP", "Standardize", "fit_standardizers"]
 
 
 def _check_positive(name: str, value: int) -> None:
     if not isinstance(value, int) or value < 1:
-        raise ValueError(f"{name} must be a positive integer, got {value!r}.")
+        raise InvalidValueError(f"{name} must be a positive integer, got {value!r}.")
 
 
 def _check_dropout(dropout: float) -> None:
     if not 0.0 <= dropout < 1.0:
-        raise ValueError(f"dropout must lie in [0, 1), got {dropout!r}.")
+        raise InvalidValueError(f"dropout must lie in [0, 1), got {dropout!r}.")
 
 
 def _concat(inputs: tuple[torch.Tensor, ...]) -> torch.Tensor:
@@ -87,7 +89,7 @@ class Standardize(nn.Module):
         (``(n, features)``, ``n >= 2``); a feature whose deviation is below ``min_scale``
         keeps scale 1, so a constant input is centred, not blown up. Returns ``self``."""
         if samples.ndim != 2 or samples.shape[-1] != self.loc.numel() or samples.shape[0] < 2:
-            raise ValueError(
+            raise InvalidValueError(
                 f"Standardize({self.loc.numel()}).fit needs (n >= 2, {self.loc.numel()}) samples, got shape {tuple(samples.shape)}."
             )
         samples = samples.to(self.loc)
@@ -180,7 +182,7 @@ class ResidualMLP(nn.Module):
         _check_positive("out_features", out_features)
         _check_positive("hidden", hidden)
         if not isinstance(num_blocks, int) or num_blocks < 0:
-            raise ValueError(f"num_blocks must be a non-negative integer, got {num_blocks!r}.")
+            raise InvalidValueError(f"num_blocks must be a non-negative integer, got {num_blocks!r}.")
         self.in_features = in_features
         self.projection = nn.Linear(in_features, hidden)
         self.blocks = nn.Sequential(*(ResidualBlock(hidden, dropout) for _ in range(num_blocks)))
@@ -189,7 +191,7 @@ class ResidualMLP(nn.Module):
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
         features = sum(t.shape[-1] for t in inputs)
         if features != self.in_features:
-            raise ValueError(
+            raise InvalidValueError(
                 f"ResidualMLP expects {self.in_features} input features, got {features} (input shapes {[tuple(t.shape) for t in inputs]})."
             )
         collapsed = [_unbroadcast(t) for t in inputs] if len(inputs) > 1 else list(inputs)

@@ -24,6 +24,8 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from tensordict.utils import NestedKey
 
+from torchrl_causal.errors import InvalidValueError, UnknownKeyError
+
 __all__ = ["ABSORBING_KEY", "AbsorbingIndicator", "add_absorbing_transitions"]
 
 #: The replay-buffer key of the absorbing-state flag (``("next", ABSORBING_KEY)`` for the next state).
@@ -80,10 +82,12 @@ def add_absorbing_transitions(
         (False, True)
     """
     if transitions.batch_dims != 1:
-        raise ValueError(f"add_absorbing_transitions expects a flat batch of transitions, got batch size {tuple(transitions.batch_size)}.")
+        raise InvalidValueError(
+            f"add_absorbing_transitions expects a flat batch of transitions, got batch size {tuple(transitions.batch_size)}."
+        )
     terminated = transitions.get(terminated_key, None)
     if terminated is None:
-        raise KeyError(f"transitions need the terminal flag {terminated_key!r} to place absorbing states.")
+        raise UnknownKeyError(f"transitions need the terminal flag {terminated_key!r} to place absorbing states.")
     terminated = terminated.reshape(transitions.shape[0], -1).any(-1)
     out = transitions.clone()
     out.set(absorbing_key, torch.zeros(*out.shape, 1, dtype=torch.bool, device=terminated.device))
@@ -141,7 +145,7 @@ class AbsorbingIndicator(TensorDictModuleBase):
     ) -> None:
         super().__init__()
         if observation_key not in network.in_keys:
-            raise KeyError(
+            raise UnknownKeyError(
                 f"AbsorbingIndicator appends the flag to {observation_key!r}, which the network does not read (in_keys {network.in_keys})."
             )
         self.network = network
@@ -153,7 +157,7 @@ class AbsorbingIndicator(TensorDictModuleBase):
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         flag = tensordict.get(self.absorbing_key, None)
         if flag is None:
-            raise KeyError(
+            raise UnknownKeyError(
                 f"{type(self).__name__} needs the boolean absorbing flag {self.absorbing_key!r}; "
                 f"found keys {list(tensordict.keys(True, True))}."
             )

@@ -8,6 +8,8 @@ import torch.nn.functional as F
 from tensordict.nn import TensorDictModule, TensorDictParams
 from torchrl.objectives import BCLoss
 
+from torchrl_causal.errors import InvalidValueError
+
 __all__ = ["HuberBCLoss"]
 
 
@@ -50,6 +52,6 @@ class HuberBCLoss(BCLoss):
 
     def __init__(self, actor_network: TensorDictModule, *, delta: float = 1.0, reduction: str | None = None) -> None:
         if not delta > 0:
-            raise ValueError(f"delta must be positive, got {delta!r}.")
+            raise InvalidValueError(f"delta must be positive, got {delta!r}.")
         super().__init__(actor_network, loss_function=partial(F.huber_loss, reduction="none", delta=delta), reduction=reduction)
         self.delta = delta

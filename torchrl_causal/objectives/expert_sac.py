@@ -15,12 +15,13 @@ from typing import Literal
 
 import torch
 from tensordict import TensorDictBase
-from tensordict.nn import dispatch, ProbabilisticTensorDictSequential, TensorDictModule
+from tensordict.nn import ProbabilisticTensorDictSequential, TensorDictModule, dispatch
 from tensordict.utils import NestedKey
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives import SACLoss
 
 from torchrl_causal.compat import SACLossWithHooks
+from torchrl_causal.errors import InvalidValueError, UnknownKeyError
 from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingIndicator
 from torchrl_causal.objectives.utils import eval_mode
 
@@ -130,15 +131,15 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
         **kwargs,
     ) -> None:
         if not 0.0 < min_alpha <= max_alpha:
-            raise ValueError(f"need 0 < min_alpha <= max_alpha, got min_alpha={min_alpha}, max_alpha={max_alpha}.")
+            raise InvalidValueError(f"need 0 < min_alpha <= max_alpha, got min_alpha={min_alpha}, max_alpha={max_alpha}.")
         if goal_value not in GOAL_VALUES:
-            raise ValueError(f"goal_value must be one of {GOAL_VALUES}, got {goal_value!r}.")
+            raise InvalidValueError(f"goal_value must be one of {GOAL_VALUES}, got {goal_value!r}.")
         if goal_value is not None and absorbing:
-            raise ValueError("goal_value and absorbing are two answers to the same bias: choose one.")
+            raise InvalidValueError("goal_value and absorbing are two answers to the same bias: choose one.")
         if bc_weight is not None and not bc_weight > 0:
-            raise ValueError(f"bc_weight must be None (off) or positive, got {bc_weight!r}.")
+            raise InvalidValueError(f"bc_weight must be None (off) or positive, got {bc_weight!r}.")
         if bc_scale not in BC_SCALES:
-            raise ValueError(f"bc_scale must be one of {BC_SCALES}, got {bc_scale!r}.")
+            raise InvalidValueError(f"bc_scale must be one of {BC_SCALES}, got {bc_scale!r}.")
         if absorbing:
             qvalue_network = AbsorbingIndicator(qvalue_network)
         super().__init__(
@@ -152,7 +153,7 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
             **kwargs,
         )
         if bc_weight is not None and self.reduction == "none":
-            raise ValueError("bc_weight needs a reduced loss (reduction='mean' or 'sum'), got reduction='none'.")
+            raise InvalidValueError("bc_weight needs a reduced loss (reduction='mean' or 'sum'), got reduction='none'.")
         self.goal_value = goal_value
         self.bc_weight = bc_weight
         self.bc_scale = bc_scale
@@ -255,12 +256,12 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
         key = self.tensor_keys.expert
         flag = tensordict.get(key, None)
         if flag is None:
-            raise KeyError(
+            raise UnknownKeyError(
                 f"{type(self).__name__} needs the boolean expert flag {key!r} in the batch "
                 f"(True for expert transitions); found keys {list(tensordict.keys(True, True))}."
             )
         if flag.dtype != torch.bool or flag.shape != (*tensordict.shape, 1):
-            raise ValueError(
+            raise InvalidValueError(
                 f"expert flag {key!r} must be a bool tensor of shape {(*tensordict.shape, 1)}, "
                 f"got dtype {flag.dtype} and shape {tuple(flag.shape)}."
             )

@@ -26,12 +26,13 @@ from typing import Literal, NamedTuple
 import torch
 import torch.nn.functional as F
 from tensordict import TensorDict, TensorDictBase
-from tensordict.nn import dispatch, ProbabilisticTensorDictSequential, TensorDictModule, TensorDictModuleBase
+from tensordict.nn import ProbabilisticTensorDictSequential, TensorDictModule, TensorDictModuleBase, dispatch
 from tensordict.utils import NestedKey
 from torchrl.objectives import ClipPPOLoss, GAILLoss
 from torchrl.objectives.utils import ValueEstimators
 
 from torchrl_causal.compat import InKeysHook, reduce_loss
+from torchrl_causal.errors import InvalidValueError, UnknownKeyError
 from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingIndicator
 from torchrl_causal.objectives.utils import eval_mode
 
@@ -248,12 +249,12 @@ class DiscriminatorReward(TensorDictModuleBase):
     ) -> None:
         super().__init__()
         if logits_key not in discriminator.out_keys:
-            raise KeyError(f"discriminator writes {discriminator.out_keys}, not the logits key {logits_key!r}.")
+            raise UnknownKeyError(f"discriminator writes {discriminator.out_keys}, not the logits key {logits_key!r}.")
         if reward not in GAIL_REWARDS:
-            raise ValueError(f"reward must be one of {GAIL_REWARDS}, got {reward!r}.")
+            raise InvalidValueError(f"reward must be one of {GAIL_REWARDS}, got {reward!r}.")
         self.absorbing = isinstance(discriminator, AbsorbingIndicator)
         if self.absorbing and not (gamma is not None and 0.0 <= gamma < 1.0):
-            raise ValueError(f"an absorbing-state discriminator needs gamma in [0, 1), got {gamma!r}.")
+            raise InvalidValueError(f"an absorbing-state discriminator needs gamma in [0, 1), got {gamma!r}.")
         self.discriminator = discriminator
         self.logits_key = logits_key
         self.reward = reward
@@ -308,7 +309,7 @@ def gail_discriminator_batch(loss: GAILLoss, expert: TensorDictBase, policy: Ten
         ['absorbing', 'action', 'collector_absorbing', 'collector_action', 'collector_observation', 'observation']
     """
     if expert.batch_size != policy.batch_size:
-        raise ValueError(
+        raise InvalidValueError(
             f"GAILLoss needs as many expert as policy transitions, got batch sizes {tuple(expert.batch_size)} "
             f"(expert) and {tuple(policy.batch_size)} (policy)."
         )

@@ -12,12 +12,13 @@ from typing import Literal
 
 import torch
 from tensordict import TensorDictBase
-from tensordict.nn import ProbabilisticTensorDictSequential, set_composite_lp_aggregate, TensorDictModule
+from tensordict.nn import ProbabilisticTensorDictSequential, TensorDictModule, set_composite_lp_aggregate
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.modules.distributions.utils import rsample_and_log_prob
 from torchrl.objectives.utils import ValueEstimators
 
 from torchrl_causal.compat import assert_on_device, entropy_coefficient, priority_weights, qvalues_per_critic, reduce_loss
+from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.objectives.expert_sac import ALPHA_CLAMP, ExpertFlaggedSACLoss
 from torchrl_causal.objectives.utils import eval_mode
 
@@ -149,11 +150,11 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
         **kwargs,
     ) -> None:
         if variant not in IQ_LEARN_VARIANTS:
-            raise ValueError(f"variant must be one of {IQ_LEARN_VARIANTS}, got {variant!r}.")
+            raise InvalidValueError(f"variant must be one of {IQ_LEARN_VARIANTS}, got {variant!r}.")
         if not isinstance(num_value_samples, int) or num_value_samples < 1:
-            raise ValueError(f"num_value_samples must be a positive integer, got {num_value_samples!r}.")
+            raise InvalidValueError(f"num_value_samples must be a positive integer, got {num_value_samples!r}.")
         if variant == "iq_learn" and kwargs.get("goal_value") is not None:
-            raise ValueError(
+            raise InvalidValueError(
                 "goal_value is derived for the paper's variant (SQIL with expert reward 1/p); "
                 "variant='iq_learn' learns its implicit reward and has no such value."
             )
@@ -205,7 +206,7 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
         )
         if expert.device.type == "cpu" and not torch.compiler.is_compiling():
             if not num_expert:  # reading a CPU tensor costs nothing
-                raise ValueError(message)
+                raise InvalidValueError(message)
         else:
             # On an accelerator, or inside a compiled graph, a host read would stall the
             # update loop (or split the graph): the device checks the count itself.

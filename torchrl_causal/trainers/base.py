@@ -34,13 +34,14 @@ from tensordict.nn import TensorDictModuleBase
 from torchrl.record.loggers import Logger
 
 from torchrl_causal.data.sources import source_checksum
-from torchrl_causal.graphs.window import AdjustmentWindow
-from torchrl_causal.progress import progress
+from torchrl_causal.errors import InvalidStateError
 from torchrl_causal.experiment.builders import expert_transitions, load_or_collect_demonstrations
 from torchrl_causal.experiment.device import resolve_device
 from torchrl_causal.experiment.interrupts import RunInterrupted, deferred_signals
 from torchrl_causal.experiment.provenance import attempt_identity, identity_changes
 from torchrl_causal.experiment.run_directory import TRAIN_CURVE, ConfigMismatchError, RunDirectory, atomic_write_text
+from torchrl_causal.graphs.window import AdjustmentWindow
+from torchrl_causal.progress import progress
 
 __all__ = ["Score", "Trainer"]
 
@@ -243,7 +244,7 @@ class Trainer(ABC):
 
     def _log(self, scalars: Mapping[str, float], step: int) -> None:
         if self.logger is None:
-            raise RuntimeError(f"{type(self).__name__}: the logger starts in fit(); train with fit() before logging")
+            raise InvalidStateError(f"{type(self).__name__}: the logger starts in fit(); train with fit() before logging")
         for name, value in scalars.items():
             self.logger.log_scalar(name, float(value), step=step)
 

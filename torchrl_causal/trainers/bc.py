@@ -20,9 +20,10 @@ from hydra.utils import instantiate
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
+from torchrl_causal.errors import InvalidValueError
+from torchrl_causal.experiment.builders import expert_transitions, load_or_collect_demonstrations, make_imitator_env, make_policy
 from torchrl_causal.modules import fit_standardizers
 from torchrl_causal.trainers.base import Trainer
-from torchrl_causal.experiment.builders import expert_transitions, load_or_collect_demonstrations, make_imitator_env, make_policy
 
 __all__ = ["BCTrainer", "episode_split"]
 
@@ -40,10 +41,10 @@ def episode_split(episode: torch.Tensor, val_fraction: float, generator: torch.G
         (1, True)
     """
     if not 0.0 < val_fraction < 1.0:
-        raise ValueError(f"val_fraction must lie in (0, 1), got {val_fraction}")
+        raise InvalidValueError(f"val_fraction must lie in (0, 1), got {val_fraction}")
     episodes = torch.unique(episode)
     if episodes.numel() < 2:
-        raise ValueError(f"a validation split needs at least 2 demonstration episodes, got {episodes.numel()}")
+        raise InvalidValueError(f"a validation split needs at least 2 demonstration episodes, got {episodes.numel()}")
     n_val = min(episodes.numel() - 1, max(1, round(val_fraction * episodes.numel())))
     held_out = episodes[torch.randperm(episodes.numel(), generator=generator)[:n_val]]
     is_val = torch.isin(episode, held_out)

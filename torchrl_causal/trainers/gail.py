@@ -15,7 +15,7 @@ absorbing states for the discriminator, and terminal steps the absorbing state's
 discounted reward.
 
 The actor has no dropout (``algo.actor.dropout`` must be 0, which
-:func:`~torchrl_causal.trainers.validate_config` enforces): PPO's ratio divides the
+:func:`~torchrl_causal.experiment.schema.validate_config` enforces): PPO's ratio divides the
 loss's probability of an action by the one recorded when it was taken, and a mask
 redrawn at every forward pass makes that ratio noise even before any update.
 
@@ -33,11 +33,11 @@ from hydra.utils import instantiate
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
+from torchrl_causal.experiment.builders import TRANSITION_KEYS, instantiate_with_strings, make_imitator_env, make_policy, observation_dim
+from torchrl_causal.experiment.device import CPU
 from torchrl_causal.objectives import ABSORBING_KEY, add_absorbing_transitions, gail_discriminator_batch
 from torchrl_causal.trainers.base import Trainer
-from torchrl_causal.experiment.builders import TRANSITION_KEYS, instantiate_with_strings, make_imitator_env, make_policy, observation_dim
 from torchrl_causal.trainers.collection import ResumableCollector
-from torchrl_causal.experiment.device import CPU
 
 __all__ = ["GAILTrainer"]
 

@@ -66,12 +66,13 @@ from tensordict.nn import TensorDictModuleBase
 from torchrl.collectors import MultiSyncCollector
 from torchrl.data import LazyMemmapStorage, LazyTensorStorage, TensorDictReplayBuffer
 
-from torchrl_causal.objectives import ExpertFlaggedSACLoss, add_absorbing_transitions, eval_mode
-from torchrl_causal.trainers.base import Trainer
+from torchrl_causal.errors import InvalidStateError, InvalidValueError
 from torchrl_causal.experiment.builders import TRANSITION_KEYS, instantiate_with_strings, make_imitator_env, make_policy, observation_dim
-from torchrl_causal.trainers.collection import ResumableCollector
 from torchrl_causal.experiment.device import CPU
 from torchrl_causal.experiment.run_directory import CheckpointError
+from torchrl_causal.objectives import ExpertFlaggedSACLoss, add_absorbing_transitions, eval_mode
+from torchrl_causal.trainers.base import Trainer
+from torchrl_causal.trainers.collection import ResumableCollector
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
 __all__ = ["OffPolicyILTrainer"]
@@ -109,7 +110,7 @@ class OffPolicyILTrainer(Trainer):
 
     def _required_warm_start(self) -> DictConfig:
         if self.warm_start is None:
-            raise RuntimeError(f"{type(self).__name__}: a warm start needs algo.warm_start (bc_updates, critic_updates)")
+            raise InvalidStateError(f"{type(self).__name__}: a warm start needs algo.warm_start (bc_updates, critic_updates)")
         return self.warm_start
 
     @property
@@ -151,7 +152,7 @@ class OffPolicyILTrainer(Trainer):
         )
         expert_batch = round(algo.batch_size * algo.expert_ratio)
         if not 1 <= expert_batch < algo.batch_size:
-            raise ValueError(
+            raise InvalidValueError(
                 f"algo.batch_size={algo.batch_size} x algo.expert_ratio={algo.expert_ratio} leaves an empty expert or policy half"
             )
         demos = self._replay_format(self.demonstration_transitions())
@@ -176,7 +177,7 @@ class OffPolicyILTrainer(Trainer):
 
     def _built_collector(self) -> ResumableCollector | MultiSyncCollector:
         if self.collector is None:
-            raise RuntimeError(f"{type(self).__name__}: the collector is not built (or closed already)")
+            raise InvalidStateError(f"{type(self).__name__}: the collector is not built (or closed already)")
         return self.collector
 
     def _replay_format(self, transitions: TensorDictBase) -> TensorDictBase:

@@ -20,6 +20,8 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.objectives import SACLoss, TargetNetUpdater
 
+from torchrl_causal.errors import InvalidValueError
+
 __all__ = ["ActorCriticUpdate", "OptimizerFactory"]
 
 #: Builds an optimiser from the parameters it updates (e.g. ``partial(torch.optim.Adam, lr=3e-4)``).
@@ -127,7 +129,7 @@ class ActorCriticUpdate:
         self.actor_optimizer = _build_optimizer(actor_optimizer, self.actor_params)
         self.alpha_optimizer = _build_optimizer(alpha_optimizer, [loss.log_alpha])
         if critic_scheduler is not None and (cosine_updates is None or cosine_updates < 1):
-            raise ValueError(f"a critic_scheduler needs cosine_updates >= 1, got {cosine_updates}")
+            raise InvalidValueError(f"a critic_scheduler needs cosine_updates >= 1, got {cosine_updates}")
         self.cosine_updates = cosine_updates
         self.critic_schedule = None if critic_scheduler is None else critic_scheduler(self.critic_optimizer, T_max=cosine_updates)
         self.updates = 0

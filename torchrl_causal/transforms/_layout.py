@@ -15,6 +15,7 @@ import torch
 from torchrl.data import Binary, Categorical, MultiCategorical, MultiOneHot, OneHot, TensorSpec, Unbounded
 from torchrl.data.tensor_specs import ContinuousBox
 
+from torchrl_causal.errors import InvalidTypeError
 from torchrl_causal.graphs.window import AdjustmentWindow
 
 __all__ = ["FeatureSlice", "LagRing", "WindowLayout", "spec_bounds"]
@@ -184,6 +185,6 @@ def spec_bounds(spec: TensorSpec, batch_ndim: int, dtype: torch.dtype) -> tuple[
     elif isinstance(spec.space, ContinuousBox):
         low, high = spec.space.low.expand(shape), spec.space.high.expand(shape)
     else:
-        raise TypeError(f"cannot derive bounds from a {type(spec).__name__} spec")
+        raise InvalidTypeError(f"cannot derive bounds from a {type(spec).__name__} spec")
     batch = shape[:batch_ndim]
     return low.to(dtype).reshape(*batch, -1), high.to(dtype).reshape(*batch, -1)

@@ -14,6 +14,7 @@ from torchrl.envs import EnvBase, Transform, TransformedEnv
 from torchrl.envs.batched_envs import BatchedEnvBase
 
 from torchrl_causal.compat import reset_mask
+from torchrl_causal.errors import InvalidStateError, InvalidTypeError, InvalidValueError, MissingAttributeError, UnknownKeyError
 from torchrl_causal.graphs.template import TimeSliceTemplate
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.transforms._layout import FeatureSlice, LagRing, WindowLayout, spec_bounds
@@ -135,7 +136,7 @@ class CausalWindowTransform(Transform):
         chunk_size: int = 2048,
     ) -> None:
         if not isinstance(window, AdjustmentWindow):
-            raise TypeError(f"window must be an AdjustmentWindow, got {type(window).__name__}")
+            raise InvalidTypeError(f"window must be an AdjustmentWindow, got {type(window).__name__}")
         # The transform stores the window it applies (not the switches), so a reloaded
         # transform never depends on how they were set.
         if not causal:
@@ -145,14 +146,14 @@ class CausalWindowTransform(Transform):
         if window.observed:
             unobserved = [var for var in window.lags if var not in window.observed]
             if unobserved:
-                raise ValueError(f"window variables {unobserved} are not observed by the imitator {window.observed}")
+                raise InvalidValueError(f"window variables {unobserved} are not observed by the imitator {window.observed}")
         out_key = unravel_key(out_key)
         inadmissible = set(window.excluded) | {v for v in window.observed if v not in window.lags and v != window.action}
         hidden_keys = (LATENT_KEY, CONFOUNDER_KEY, *sorted(inadmissible))
         if out_key in window.lags or out_key in hidden_keys:
-            raise ValueError(f"out_key {out_key!r} would overwrite a variable of the window or a hidden key")
+            raise InvalidValueError(f"out_key {out_key!r} would overwrite a variable of the window or a hidden key")
         if chunk_size < 1:
-            raise ValueError(f"chunk_size must be positive, got {chunk_size}")
+            raise InvalidValueError(f"chunk_size must be positive, got {chunk_size}")
         state_keys = [var for var, lags in window.lags.items() if lags and var != window.action]
         super().__init__(in_keys=state_keys, out_keys=[out_key])
         self.window = window
@@ -207,7 +208,7 @@ class CausalWindowTransform(Transform):
         try:
             state = state_dict[prefix + "_extra_state"]
         except KeyError:
-            raise KeyError(f"no CausalWindowTransform state under {prefix + '_extra_state'!r}") from None
+            raise UnknownKeyError(f"no CausalWindowTransform state under {prefix + '_extra_state'!r}") from None
         transform = cls(
             AdjustmentWindow.from_dict(state["window"]),
             out_key=state["out_key"],
@@ -233,7 +234,7 @@ class CausalWindowTransform(Transform):
     def _require_layout(self) -> WindowLayout:
         if self._layout is None:
             if self.parent is None:
-                raise RuntimeError(
+                raise InvalidStateError(
                     "the variable shapes are unknown: attach the transform to an env, encode data first, or pass shapes explicitly"
                 )
             _, layout, _ = self._leaf_specs(self.parent.full_observation_spec, self.parent.full_action_spec)
@@ -244,7 +245,7 @@ class CausalWindowTransform(Transform):
         if self._layout is not None:
             for var, known in self._layout.shapes.items():
                 if shapes[var] != known:
-                    raise ValueError(
+                    raise InvalidValueError(
                         f"shape mismatch for key {self._variable_key(var)!r}: this transform encodes "
                         f"events of shape {known}, got {shapes[var]}"
                     )
@@ -268,7 +269,7 @@ class CausalWindowTransform(Transform):
             key = self._variable_key(var)
             container, name = (action_spec, "action") if var == self.window.action else (observation_spec, "observation")
             if key not in container.keys(True, True):
-                raise KeyError(
+                raise UnknownKeyError(
                     f"window variable {var!r} (key {key!r}) is missing from the env's {name} spec; "
                     f"available keys: {sorted(map(str, container.keys(True, True)))}"
                 )
@@ -308,7 +309,7 @@ class CausalWindowTransform(Transform):
     def reset_key(self) -> NestedKey:
         reset_keys = self.parent.reset_keys
         if len(reset_keys) != 1:
-            raise RuntimeError(f"{type(self).__name__} supports envs with one reset key, got {reset_keys}")
+            raise InvalidStateError(f"{type(self).__name__} supports envs with one reset key, got {reset_keys}")
         return reset_keys[0]
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
@@ -327,13 +328,13 @@ class CausalWindowTransform(Transform):
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
         ring = self._ring
         if ring is None:
-            raise RuntimeError(f"{type(self).__name__}: reset the env before stepping it")
+            raise InvalidStateError(f"{type(self).__name__}: reset the env before stepping it")
         layout = self._require_layout()
         batch = next_tensordict.batch_size
         if layout.has_action:
             action = tensordict.get(self.action_key, None)
             if action is None:
-                raise KeyError(f"the action key {self.action_key!r} is missing from the step's input")
+                raise UnknownKeyError(f"the action key {self.action_key!r} is missing from the step's input")
             if not layout.vector_action:
                 action = action.reshape(*batch, -1)
             if action.shape != ring.action_shape:  # copy_ would broadcast a wrong shape silently
@@ -356,12 +357,12 @@ class CausalWindowTransform(Transform):
             if layout.has_nonvector_state:
                 values = [value.reshape(*batch, -1) for value in values]
             states = torch.cat(values, -1) if len(values) != 1 else values[0]
-            if states.shape[-1] != layout.state_width:
-                raise RuntimeError
         except KeyError:
             missing = [var for var in layout.state_variables if var not in tensordict.keys()]
-            raise KeyError(f"admissible keys {missing} are missing from the env's output") from None
-        except RuntimeError:
+            raise UnknownKeyError(f"admissible keys {missing} are missing from the env's output") from None
+        except RuntimeError:  # torch.cat of mismatched shapes
+            self._raise_shape_error(tensordict, batch, layout.state_variables)
+        if states.shape[-1] != layout.state_width:
             self._raise_shape_error(tensordict, batch, layout.state_variables)
         return states
 
@@ -371,15 +372,15 @@ class CausalWindowTransform(Transform):
             expected = (*batch, *self._require_layout().shapes[var])
             got = tuple(tensordict.get(key).shape)
             if got != expected:
-                raise ValueError(f"shape mismatch for key {key!r}: expected {expected}, got {got}")
-        raise RuntimeError(f"could not encode {list(variables)} from {tensordict}")
+                raise InvalidValueError(f"shape mismatch for key {key!r}: expected {expected}, got {got}")
+        raise InvalidStateError(f"could not encode {list(variables)} from {tensordict}")
 
     def _check_frames_nan(self, frames: torch.Tensor, layout: WindowLayout) -> None:
         nan_columns = torch.isnan(frames).any(0).nonzero()
         if nan_columns.numel():
             column = int(nan_columns[0])
             var = next(v for v, offset in layout.frame_offsets.items() if offset <= column < offset + layout.widths[v])
-            raise ValueError(
+            raise InvalidValueError(
                 f"NaN in admissible key {self._variable_key(var)!r}; refusing to encode it for the policy "
                 "(check_nan=False disables this check)"
             )
@@ -394,7 +395,7 @@ class CausalWindowTransform(Transform):
             return
         column = int(nan_columns[0])
         feature = next(f for f in self._require_layout().features if f.columns.start <= column < f.columns.stop)
-        raise ValueError(
+        raise InvalidValueError(
             f"NaN in admissible key {self._variable_key(feature.variable)!r} at lag {feature.lag}; "
             "refusing to feed it to the policy (check_nan=False disables this check)"
         )
@@ -411,7 +412,7 @@ class CausalWindowTransform(Transform):
         Raises:
             RuntimeError: always, naming the two correct uses.
         """
-        raise RuntimeError(
+        raise InvalidStateError(
             f"{type(self).__name__} cannot encode a batch of rows on its own: a step's lags need its "
             "episode's earlier steps. For stored, time-ordered episodes call encode_trajectories(data); in "
             "a replay buffer use the transform and sample unit of make_rb_transform_and_sample_unit()"
@@ -483,7 +484,7 @@ class CausalWindowTransform(Transform):
             KeyError: a key of ``keys`` that the encoding lacks, named.
         """
         if trajectories.batch_dims == 0:
-            raise ValueError("encode_trajectories needs a time dimension, got a TensorDict with batch_size=[]")
+            raise InvalidValueError("encode_trajectories needs a time dimension, got a TensorDict with batch_size=[]")
         shape = trajectories.batch_size
         flat = trajectories.reshape(-1)
         layout = self._layout_from_data(flat)
@@ -529,7 +530,7 @@ class CausalWindowTransform(Transform):
             return out
         missing = [key for key in keys if key not in out.keys(True, True)]
         if missing:
-            raise KeyError(f"the encoded trajectories lack {missing}: the stored data does not record them")
+            raise UnknownKeyError(f"the encoded trajectories lack {missing}: the stored data does not record them")
         return out.select(*keys)
 
     def _layout_from_data(self, flat: TensorDictBase) -> WindowLayout:
@@ -540,7 +541,7 @@ class CausalWindowTransform(Transform):
             key = self._variable_key(var)
             value = flat.get(key, None)
             if value is None:
-                raise KeyError(f"window variable {var!r} (key {key!r}) is missing from the trajectories")
+                raise UnknownKeyError(f"window variable {var!r} (key {key!r}) is missing from the trajectories")
             leaves[var] = value
         shapes = {var: tuple(value.shape[1:]) for var, value in leaves.items()}
         dtype = self._dtype or _encoding_dtype(value.dtype for value in leaves.values())
@@ -555,7 +556,7 @@ class CausalWindowTransform(Transform):
         else:
             done = flat.get(("next", "done"), None)
             if done is None:
-                raise KeyError("trajectories need 'is_init' or ('next', 'done') to delimit episodes")
+                raise UnknownKeyError("trajectories need 'is_init' or ('next', 'done') to delimit episodes")
             starts = torch.cat([done.new_ones(1), done.reshape(n, -1).any(-1)[:-1]])
         index = torch.arange(n, device=starts.device)
         if row_length is not None:
@@ -594,14 +595,14 @@ class CausalWindowTransform(Transform):
         mine = self.window.to_dict()
         differing = sorted(field for field in mine if mine[field] != saved.get(field))
         if differing or list(saved["lags"]) != list(mine["lags"]):
-            raise ValueError(
+            raise InvalidValueError(
                 f"the saved state encodes a different adjustment window (fields {differing or ['lags order']} "
                 f"differ): saved {saved}, this transform {mine}; rebuild it with "
                 "CausalWindowTransform.from_state_dict"
             )
         for name in ("out_key", "action_key"):
             if unravel_key(state[name]) != getattr(self, name):
-                raise ValueError(f"the saved state has {name}={state[name]!r}, this transform {getattr(self, name)!r}")
+                raise InvalidValueError(f"the saved state has {name}={state[name]!r}, this transform {getattr(self, name)!r}")
         if state.get("shapes") is not None:
             self._set_layout({var: tuple(s) for var, s in state["shapes"].items()}, None)
         if state.get("ring") is not None:
@@ -664,12 +665,12 @@ def imitator_window(
         ['W', 'X', 'Z']
     """
     if isinstance(k, bool) or not isinstance(k, int) or k < 0:
-        raise ValueError(f"window size k must be a non-negative int, got {k!r}")
+        raise InvalidValueError(f"window size k must be a non-negative int, got {k!r}")
     from torchrl_causal.graphs import observation_window, windowed_adjustment
 
     if causal:
         if window_matched:
-            raise ValueError("window_matched=True only applies to the non-causal baseline (causal=False)")
+            raise InvalidValueError("window_matched=True only applies to the non-causal baseline (causal=False)")
         return windowed_adjustment(template, k, mode=mode)
     return observation_window(template, k if window_matched else None)
 
@@ -698,7 +699,7 @@ def causal_template(env: EnvBase) -> TimeSliceTemplate:
     if not isinstance(env, BatchedEnvBase):
         template = getattr(env, "causal_template", None)
         if template is None:
-            raise AttributeError(f"{type(env).__name__} exposes no causal_template to build a window from")
+            raise MissingAttributeError(f"{type(env).__name__} exposes no causal_template to build a window from")
         return template
     if env.is_closed:
         templates = _unstarted_sub_env_templates(env)
@@ -706,10 +707,10 @@ def causal_template(env: EnvBase) -> TimeSliceTemplate:
         try:
             templates = list(env.causal_template)
         except AttributeError:
-            raise AttributeError(f"the sub-envs of {type(env).__name__} expose no causal_template to build a window from") from None
+            raise MissingAttributeError(f"the sub-envs of {type(env).__name__} expose no causal_template to build a window from") from None
     for index, template in enumerate(templates[1:], 1):
         if template != templates[0]:
-            raise ValueError(
+            raise InvalidValueError(
                 f"sub-env {index} of {type(env).__name__} has another causal template than sub-env 0: {template} != {templates[0]}"
             )
     return templates[0]

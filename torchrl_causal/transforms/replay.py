@@ -20,6 +20,8 @@ from torchrl.data.replay_buffers import Sequence
 from torchrl.data.replay_buffers.storages import Storage
 from torchrl.envs import Transform
 
+from torchrl_causal.errors import InvalidStateError, InvalidValueError, UnknownKeyError
+
 if TYPE_CHECKING:
     from torchrl_causal.transforms.causal_window import CausalWindowTransform
 
@@ -90,7 +92,7 @@ class EpisodeHistory(Sequence):
         done_key: NestedKey = ("next", "done"),
     ) -> None:
         if isinstance(k, bool) or not isinstance(k, int) or k < 0:
-            raise ValueError(f"window size k must be a non-negative int, got {k!r}")
+            raise InvalidValueError(f"window size k must be a non-negative int, got {k!r}")
         super().__init__(length=1, episode_boundary="pad", done_key=unravel_key(done_key), burn_in=k)
         self.init_key = unravel_key(init_key)
         self.traj_key = None if traj_key is None else unravel_key(traj_key)
@@ -104,7 +106,7 @@ class EpisodeHistory(Sequence):
         self, index: torch.Tensor | tuple[torch.Tensor], info: dict[str, Any], storage: Storage
     ) -> tuple[torch.Tensor, dict[str, Any]]:
         if getattr(storage, "ndim", 1) != 1:
-            raise ValueError(
+            raise InvalidValueError(
                 f"EpisodeHistory needs a 1-D storage, got {storage.ndim} dimensions: store transitions "
                 "flattened in time order (e.g. batch.reshape(-1)) with their trajectory ids"
             )
@@ -129,7 +131,7 @@ class EpisodeHistory(Sequence):
             return index, info
         good = encodable.nonzero().squeeze(-1)
         if not good.numel():
-            raise RuntimeError(
+            raise InvalidStateError(
                 f"none of the {len(encodable)} sampled steps has its {self.burn_in} previous steps in the storage "
                 "(overwritten, or stored apart from them)"
             )
@@ -154,7 +156,7 @@ class EpisodeHistory(Sequence):
             column = storage.get(key)
         except KeyError:
             hint = " (True at each episode's first step: collect with torchrl.envs.InitTracker)" if key == self.init_key else ""
-            raise KeyError(f"EpisodeHistory needs {key!r} in the stored transitions{hint}") from None
+            raise UnknownKeyError(f"EpisodeHistory needs {key!r} in the stored transitions{hint}") from None
         return column.reshape(column.shape[0], -1).to(device)
 
 
@@ -182,7 +184,7 @@ class EpisodeWindowEncoder(Transform):
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         width = self.transform.window.k + 1
         if tensordict.batch_dims != 1 or tensordict.numel() % width:
-            raise ValueError(
+            raise InvalidValueError(
                 f"expected a flat batch of windows of {width} records (sampled with EpisodeHistory({width - 1})), "
                 f"got batch_size={list(tensordict.batch_size)}"
             )
