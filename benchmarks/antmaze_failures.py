@@ -11,12 +11,12 @@ below ``--flip-height`` is a flip.
 
 from __future__ import annotations
 
-import argparse
 
 import torch
 from tensordict.nn import InteractionType, set_interaction_type
 
 from torchrl_causal.lifecycle import open_run
+from torchrl_causal.cli.arguments import OneLineParser, count, non_negative, non_negative_number
 
 
 def classify(run_dir: str, regime: str, episodes: int, seed: int, flip_height: float) -> dict[str, float]:
@@ -49,12 +49,12 @@ def classify(run_dir: str, regime: str, episodes: int, seed: int, flip_height: f
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="+", help="run directories (with checkpoints/best.pt)")
     parser.add_argument("--regime", default="deploy", choices=["train", "deploy"])
-    parser.add_argument("--episodes", type=int, default=200)
-    parser.add_argument("--seed", type=int, default=40_000)
-    parser.add_argument("--flip-height", type=float, default=0.35)
+    parser.add_argument("--episodes", type=count, default=200)
+    parser.add_argument("--seed", type=non_negative, default=40_000)
+    parser.add_argument("--flip-height", type=non_negative_number, default=0.35)
     args = parser.parse_args()
     torch.set_num_threads(1)
     print(

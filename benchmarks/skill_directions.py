@@ -16,7 +16,6 @@ env_options={"command_spread": s})`` (the same simulations for every body: one s
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
 from pathlib import Path
@@ -25,15 +24,16 @@ import torch
 
 from torchrl_causal.envs.humanoid import load_humanoid_locomotion_network
 from torchrl_causal.envs.locomotion import evaluate_locomotion
+from torchrl_causal.cli.arguments import OneLineParser, count
 
 SPREADS: dict[str, float] = {"straight ahead": 0.0, "within pi/4": math.pi / 4, "within pi/2": math.pi / 2, "uniform": math.pi}
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--weights", type=Path, nargs="+", required=True, help="skill bodies (state dicts) to compare")
-    parser.add_argument("--envs", type=int, default=32, help="simulations per spread")
-    parser.add_argument("--steps", type=int, default=400, help="control steps per simulation (40 Hz)")
+    parser.add_argument("--envs", type=count, default=32, help="simulations per spread")
+    parser.add_argument("--steps", type=count, default=400, help="control steps per simulation (40 Hz)")
     args = parser.parse_args(argv)
     missing = [str(path) for path in args.weights if not path.is_file()]
     if missing:

@@ -25,7 +25,6 @@ critics' distance from the goal-valued fixed point, which 5000 updates do not cl
 
 from __future__ import annotations
 
-import argparse
 import copy
 import time
 from typing import NamedTuple
@@ -39,6 +38,7 @@ from torchrl_causal.experiment.config import compose_config
 from torchrl_causal.experiment.run_directory import RunDirectory
 from torchrl_causal.objectives.utils import eval_mode
 from torchrl_causal.trainers.off_policy import OffPolicyILTrainer
+from torchrl_causal.cli.arguments import OneLineParser, count
 
 DEFAULT_OVERRIDES = ["env=antmaze_medium", "+row=c_sqil", "scale=cpu_ant", "+recipe=goal_valued_bc_anchored"]
 
@@ -70,12 +70,12 @@ def deterministic_actions(trainer: OffPolicyILTrainer, batches: list) -> list[to
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument("--demos", required=True, help="a collected demonstrations folder (demos.path)")
     parser.add_argument("--run-root", required=True, help="a scratch folder for the replay buffer")
     parser.add_argument("--overrides", nargs="*", default=DEFAULT_OVERRIDES)
-    parser.add_argument("--updates", type=int, default=500)
-    parser.add_argument("--episodes", type=int, default=20)
+    parser.add_argument("--updates", type=count, default=500)
+    parser.add_argument("--episodes", type=count, default=20)
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     args = parser.parse_args()
     torch.set_num_threads(1)
