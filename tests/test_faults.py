@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
-from tiny_runs import tiny
+from tiny_runs import merged, tiny
 
 # Imported once here, before the forks. The commands' own modules (torchrl_causal.train...)
 # are not: each case runs its module as __main__, as ``python -m`` does.
@@ -255,13 +255,21 @@ def _cases(trained: Path) -> list[Case]:
     run = _copy_of(trained)
     fresh = ["run_root={root}/runs", *TINY_BC]
     rerun = ["run_root={root}", *TINY_BC]
+
+    # A key of TINY_BC named again takes the case's value (the command line refuses a key given twice).
+    def fresh_with(*extra: str) -> list[str]:
+        return merged([*fresh, *extra])
+
+    def rerun_with(*extra: str) -> list[str]:
+        return merged([*rerun, *extra])
+
     T, E, R, S = "torchrl_causal.train", "torchrl_causal.evaluate", "torchrl_causal.report", "torchrl_causal.status"
     A, F, X = "torchrl_causal.strength_ablation", "torchrl_causal.filmstrip", "torchrl_causal.archive"
     B = "benchmarks/transform_overhead.py"
     in_run = f"{{root}}/{RUN}"
     return [
         # ---- train: sizes, keys, budgets, files
-        Case("train window longer than horizon", T, [*fresh, "window.k=100000"], "window.k=100000 must be < env.horizon"),
+        Case("train window longer than horizon", T, fresh_with("window.k=100000"), "window.k=100000 must be < env.horizon"),
         Case("train +typo key", T, [*fresh, "+windw.k=2"], "config key windw.k is unknown"),
         Case("train typo key", T, [*fresh, "windw.k=2"], "windw"),
         Case("train seed not a number", T, [*fresh, "seed=abc"], "seed=abc"),
@@ -288,7 +296,7 @@ def _cases(trained: Path) -> list[Case]:
             ),
         ),
         Case("train status corrupted", T, rerun, "status.json", setup=_then(run, _write(f"{RUN}/status.json", b"{"))),
-        Case("train config changed", T, [*rerun, "algo.batch_size=7"], "holds a run of another config", setup=run),
+        Case("train config changed", T, rerun_with("algo.batch_size=7"), "holds a run of another config", setup=run),
         # ---- train: a folder that is not a run's is neither cleared nor written into
         Case(
             "train resume=false over the user's files",
@@ -358,7 +366,7 @@ def _cases(trained: Path) -> list[Case]:
             E,
             [f"run_dir={in_run}", "episodes=2"],
             "config.yaml changed since its policy was selected",
-            setup=_then(run, _edit(f"{RUN}/config.yaml", "maze: u", "maze: medium")),
+            setup=_then(run, _edit(f"{RUN}/config.yaml", "\nseed: 0\n", "\nseed: 5\n")),
         ),
         Case(
             "evaluate weights edited",
@@ -572,3 +580,18 @@ def test_every_benchmark_checks_its_numbers() -> None:
         text = path.read_text()
         assert "OneLineParser(" in text and "argparse.ArgumentParser(" not in text, path.name
         assert "type=int" not in text and "type=float" not in text, path.name
+
+
+def test_every_shipped_policy_agrees_with_its_run_files() -> None:
+    """Each policy in ``results/policies`` records the digests of its weights, config and window
+    (``checkpoints/best.json``), and its config, window, weights and final records pass the
+    checks ``evaluate`` makes before it evaluates (an edited file is refused, see the cases)."""
+    from torchrl_causal.experiment import RunDirectory
+    from torchrl_causal.lifecycle import open_run
+
+    shipped = sorted(path.parent.parent for path in (REPO / "results" / "policies").rglob("checkpoints/best.pt"))
+    assert len(shipped) >= 10
+    for run_dir in shipped:
+        assert RunDirectory(run_dir).policy_identity_file.is_file(), run_dir
+        _, _, policy = open_run(run_dir, device="cpu")
+        assert policy is not None
