@@ -28,7 +28,6 @@ Usage:
 
 from __future__ import annotations
 
-import argparse
 import gc
 import os
 import platform
@@ -41,6 +40,7 @@ from typing import Any
 import networkx as nx
 from tqdm import tqdm
 
+from torchrl_causal.cli.arguments import OneLineParser, count, non_negative
 from torchrl_causal.envs.templates import ANTMAZE_TEMPLATE, HUMANOIDMAZE_TEMPLATE
 from torchrl_causal.graphs import (
     REWARD,
@@ -125,10 +125,10 @@ def check_sets(template: TimeSliceTemplate, horizon: int) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--repeats", type=int, default=3, help="timed runs per case (best is kept)")
-    parser.add_argument("--horizons", type=int, nargs="+", default=[1, 100, 500, 1000, 2000])
-    parser.add_argument("--windows", type=int, nargs="+", default=[2, 10])
+    parser = OneLineParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--repeats", type=count, default=3, help="timed runs per case (best is kept)")
+    parser.add_argument("--horizons", type=count, nargs="+", default=[1, 100, 500, 1000, 2000])
+    parser.add_argument("--windows", type=non_negative, nargs="+", default=[2, 10])
     parser.add_argument("--output", default="results/adjustment_runtime.md")
     args = parser.parse_args()
     load_before = os.getloadavg()

@@ -22,7 +22,6 @@ Run: ``OMP_NUM_THREADS=1 python benchmarks/antmaze_speed.py [--steps 300] [--rou
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
 from collections.abc import Callable
@@ -33,6 +32,7 @@ import numpy as np
 import torch
 from torchrl.envs import EnvBase, GymEnv
 
+from torchrl_causal.cli.arguments import OneLineParser, count
 from torchrl_causal.envs import AntMazeEnv
 
 BASELINE = "gymnasium-robotics AntMaze_Medium-v5"
@@ -59,10 +59,10 @@ def torchrl_rate(env: EnvBase, actions: torch.Tensor) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=300, help="control steps per round (per env)")
-    parser.add_argument("--rounds", type=int, default=7)
-    parser.add_argument("--batch", type=int, nargs="+", default=[1, 16], help="batch sizes of AntMazeEnv")
+    parser = OneLineParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=count, default=300, help="control steps per round (per env)")
+    parser.add_argument("--rounds", type=count, default=7)
+    parser.add_argument("--batch", type=count, nargs="+", default=[1, 16], help="batch sizes of AntMazeEnv")
     args = parser.parse_args()
     torch.set_num_threads(1)
     gymnasium.register_envs(gymnasium_robotics)

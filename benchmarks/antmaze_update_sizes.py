@@ -30,6 +30,8 @@ import time
 import torch
 from gpu_throughput import LOSSES, make_batch, make_update, timed_rate
 
+from torchrl_causal.cli.arguments import OneLineParser, count
+
 ANTMAZE_WINDOW_DIM = 25 * 11 + 8 * 10
 SIZES = ("256x3", "128x2", "64x2")
 
@@ -60,12 +62,12 @@ def measure(loss: str, size: str, observation_dim: int, compiled: bool, updates:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--updates", type=int, default=20)
-    parser.add_argument("--rounds", type=int, default=3)
+    parser = OneLineParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--updates", type=count, default=20)
+    parser.add_argument("--rounds", type=count, default=3)
     parser.add_argument("--losses", nargs="+", default=["SQILLoss"], choices=sorted(LOSSES))
     parser.add_argument("--sizes", nargs="+", default=list(SIZES), help="WIDTHxBLOCKS; the first is the baseline")
-    parser.add_argument("--observation-dim", type=int, default=ANTMAZE_WINDOW_DIM)
+    parser.add_argument("--observation-dim", type=count, default=ANTMAZE_WINDOW_DIM)
     parser.add_argument("--compile", action="store_true", help="also measure compile=True")
     parser.add_argument("--one", nargs=2, metavar=("LOSS", "SIZE"), help=argparse.SUPPRESS)  # the child process
     args = parser.parse_args()

@@ -20,9 +20,9 @@ failed in one seed of four. Results: ``results/demo_seed_spread.md``.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
+from torchrl_causal.cli.arguments import OneLineParser, non_negative
 from torchrl_causal.cli.demo import demo_overrides
 from torchrl_causal.experiment import compose_config
 from torchrl_causal.lifecycle import run
@@ -42,9 +42,9 @@ VARIANTS: dict[str, list[str]] = {
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument("--root", required=True, type=Path)
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
+    parser.add_argument("--seeds", type=non_negative, nargs="+", default=[0, 1, 2, 3])
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     parser.add_argument("--demos", required=True, type=Path, help="a collected demonstration set (demos.path)")
     args = parser.parse_args()

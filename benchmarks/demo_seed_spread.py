@@ -11,10 +11,10 @@ measured value minus the threshold, in points; negative fails), and the spread o
 
 from __future__ import annotations
 
-import argparse
 import statistics
 from pathlib import Path
 
+from torchrl_causal.cli.arguments import OneLineParser, count, non_negative
 from torchrl_causal.cli.demo import DEMO_RUNS, demo_overrides
 from torchrl_causal.evaluation import aggregate, effect_checks, load_runs
 from torchrl_causal.experiment import compose_config
@@ -28,10 +28,10 @@ def run_overrides(overrides: list[str]) -> int:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument("--root", required=True, type=Path)
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--seeds", type=non_negative, nargs="+", default=[0, 1, 2, 3])
+    parser.add_argument("--workers", type=count, default=2)
     args = parser.parse_args()
     jobs = [
         [*demo_overrides(algo, causal, args.root / f"seed{seed}"), f"seed={seed}", f"demos.seed={seed}"]

@@ -18,7 +18,6 @@ Nothing is written to the run directory.
 
 from __future__ import annotations
 
-import argparse
 import math
 
 import torch
@@ -26,6 +25,7 @@ import torch.nn.functional as F
 from hydra.utils import get_class
 from tensordict import TensorDictBase
 
+from torchrl_causal.cli.arguments import OneLineParser, count, non_negative, positive_number
 from torchrl_causal.experiment import RunDirectory
 from torchrl_causal.experiment.builders import TRANSITION_KEYS, make_window
 from torchrl_causal.objectives import GAILDiscriminatorLoss, gail_discriminator_batch
@@ -60,13 +60,13 @@ def score(loss: GAILDiscriminatorLoss, expert: TensorDictBase, policy: TensorDic
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("run_dir")
     parser.add_argument("--checkpoint", choices=("last", "best"), default="last")
-    parser.add_argument("--steps", type=int, nargs="+", default=[2, 16, 50, 200])
-    parser.add_argument("--lr", type=float, default=None, help="defaults to algo.discriminator_optimizer.lr")
-    parser.add_argument("--eval-rows", type=int, default=4096)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--steps", type=count, nargs="+", default=[2, 16, 50, 200])
+    parser.add_argument("--lr", type=positive_number, default=None, help="defaults to algo.discriminator_optimizer.lr")
+    parser.add_argument("--eval-rows", type=count, default=4096)
+    parser.add_argument("--seed", type=non_negative, default=0)
     args = parser.parse_args()
     torch.set_num_threads(1)
     run = RunDirectory(args.run_dir)

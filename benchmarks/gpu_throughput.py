@@ -30,7 +30,6 @@ Commands (see results/gpu_throughput.md):
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import tempfile
 import time
@@ -44,6 +43,7 @@ from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.data import Bounded
 from torchrl.objectives import SACLoss, SoftUpdate
 
+from torchrl_causal.cli.arguments import OneLineParser, count, non_negative
 from torchrl_causal.experiment import compose_config
 from torchrl_causal.experiment.builders import make_imitator_env, make_policy, make_window
 from torchrl_causal.experiment.device import CPU, resolve_device
@@ -250,7 +250,7 @@ def print_updates(results: dict[str, dict[str, dict[str, float]]]) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument("--part", choices=["updates", "collector", "both"], default="both")
     parser.add_argument(
         "--devices", nargs="+", default=["cpu", "cuda"], help="devices to measure; one this machine lacks is reported as unmeasured"
@@ -265,16 +265,16 @@ def main() -> None:
         default=list(LOSSES),
         help=f"losses to time ({BASELINE!r}, the baseline, is always timed)",
     )
-    parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--updates", type=int, default=5, help="timed updates per variant per round (CPU)")
-    parser.add_argument("--cuda-updates", type=int, default=200, help="timed updates per variant per round (CUDA)")
-    parser.add_argument("--warmup", type=int, default=3)
+    parser.add_argument("--rounds", type=count, default=5)
+    parser.add_argument("--updates", type=count, default=5, help="timed updates per variant per round (CPU)")
+    parser.add_argument("--cuda-updates", type=count, default=200, help="timed updates per variant per round (CUDA)")
+    parser.add_argument("--warmup", type=non_negative, default=3)
     parser.add_argument("--clock", choices=["cpu", "wall"], default="cpu", help="clock of the CPU half")
-    parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--workers", type=int, nargs="+", default=[1], help="collector env processes")
-    parser.add_argument("--num-envs", type=int, default=8)
-    parser.add_argument("--frames", type=int, default=400, help="env steps per collector batch")
-    parser.add_argument("--collector-batches", type=int, default=3)
+    parser.add_argument("--threads", type=count, default=1)
+    parser.add_argument("--workers", type=count, nargs="+", default=[1], help="collector env processes")
+    parser.add_argument("--num-envs", type=count, default=8)
+    parser.add_argument("--frames", type=count, default=400, help="env steps per collector batch")
+    parser.add_argument("--collector-batches", type=count, default=3)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     warnings.filterwarnings("ignore", category=UserWarning)

@@ -16,11 +16,12 @@ Time the two whole processes with::
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
 import torch
+
+from torchrl_causal.cli.arguments import OneLineParser, count
 
 
 def step_ours(batch: int, steps: int) -> float:
@@ -57,10 +58,10 @@ def step_ogbench(batch: int, steps: int) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--route", choices=("ours", "ogbench"), required=True)
-    parser.add_argument("--batch", type=int, default=8)
-    parser.add_argument("--steps", type=int, default=16_000, help="env steps in all")
+    parser.add_argument("--batch", type=count, default=8)
+    parser.add_argument("--steps", type=count, default=16_000, help="env steps in all")
     args = parser.parse_args()
     torch.set_num_threads(1)
     stepping = (step_ours if args.route == "ours" else step_ogbench)(args.batch, args.steps)

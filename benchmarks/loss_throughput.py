@@ -29,6 +29,7 @@ from torchrl.data import Bounded
 from torchrl.objectives import SACLoss, SoftUpdate
 from tqdm import tqdm
 
+from torchrl_causal.cli.arguments import OneLineParser, count, non_negative
 from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
 from torchrl_causal.objectives import ALPHA_CLAMP, IQLearnLoss, SQILLoss
 
@@ -164,11 +165,11 @@ def run(config: Config, rounds: int, warmup: int, clock) -> list[tuple[str, floa
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = OneLineParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--config", choices=[*CONFIGS, "both", "all"], default="both", help="both: paper and small; all: every config")
-    parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads (default 1)")
-    parser.add_argument("--rounds", type=int, default=7)
-    parser.add_argument("--warmup", type=int, default=3)
+    parser.add_argument("--threads", type=count, default=1, help="torch intra-op threads (default 1)")
+    parser.add_argument("--rounds", type=count, default=7)
+    parser.add_argument("--warmup", type=non_negative, default=3)
     parser.add_argument(
         "--clock",
         choices=list(CLOCKS),

@@ -21,7 +21,6 @@ start, the two things a walking skill must get right before the maze's success r
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -29,6 +28,7 @@ from typing import NamedTuple
 
 import torch
 
+from torchrl_causal.cli.arguments import OneLineParser, count, non_negative, non_negative_number, positive_number
 from torchrl_causal.envs import AntMazeEnv, HumanoidMazeEnv
 from torchrl_causal.evaluation import evaluate_policy
 from torchrl_causal.experts import AntMazeExpert, HumanoidMazeExpert
@@ -99,16 +99,18 @@ def falls_and_reach(maze: str, batch: int, seed: int, weights: str | None, clear
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--robot", choices=sorted(ROBOTS), default="ant")
     parser.add_argument("--mazes", nargs="+", default=["medium", "large"])
     parser.add_argument("--regimes", nargs="+", default=["train", "deploy"])
-    parser.add_argument("--radius", nargs="+", type=float, default=[0.5, 5.0], help="success radii (m)")
-    parser.add_argument("--episodes", type=int, default=500)
-    parser.add_argument("--batch", type=int, default=50, help="parallel episodes")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--radius", nargs="+", type=positive_number, default=[0.5, 5.0], help="success radii (m)")
+    parser.add_argument("--episodes", type=count, default=500)
+    parser.add_argument("--batch", type=count, default=50, help="parallel episodes")
+    parser.add_argument("--seed", type=non_negative, default=0)
     parser.add_argument("--weights", default=None, help="locomotion state dict (default: the shipped one)")
-    parser.add_argument("--clearance", type=float, default=None, help="the planner's line-of-sight half-width (m; default: the expert's)")
+    parser.add_argument(
+        "--clearance", type=non_negative_number, default=None, help="the planner's line-of-sight half-width (m; default: the expert's)"
+    )
     parser.add_argument("--output", default=None, help="write the markdown table here too")
     parser.add_argument("--falls", action="store_true", help="humanoid: per-episode first fall and distance walked instead")
     args = parser.parse_args()

@@ -13,20 +13,21 @@ not an update cost. The batch and the update are ``gpu_throughput.py``'s, at Ant
 
 from __future__ import annotations
 
-import argparse
 import statistics
 
 import torch
 from antmaze_update_sizes import ANTMAZE_WINDOW_DIM
 from gpu_throughput import make_batch, make_update, timed_rate
 
+from torchrl_causal.cli.arguments import OneLineParser, count
+
 PAIRS = {"SQILLoss": "SQILLoss recipe", "IQLearnLoss K=16": "IQLearnLoss K=16 recipe"}
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--updates", type=int, default=20)
-    parser.add_argument("--rounds", type=int, default=5)
+    parser = OneLineParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--updates", type=count, default=20)
+    parser.add_argument("--rounds", type=count, default=5)
     parser.add_argument("--size", default="128x2", help="WIDTHxBLOCKS of actor and critics")
     parser.add_argument("--losses", nargs="+", default=list(PAIRS), choices=list(PAIRS))
     parser.add_argument("--compile", action="store_true")

@@ -22,7 +22,6 @@ Run: ``OMP_NUM_THREADS=1 python benchmarks/rover_speed.py [--batch 256] [--steps
 
 from __future__ import annotations
 
-import argparse
 import math
 import statistics
 import time
@@ -30,6 +29,7 @@ from collections.abc import Callable
 
 import torch
 
+from torchrl_causal.cli.arguments import OneLineParser, count, non_negative
 from torchrl_causal.envs import RoverMazeEnv
 from torchrl_causal.envs.rover_maze import rover_dynamics, unit_heading
 from torchrl_causal.experts import RoverExpert
@@ -99,12 +99,12 @@ def expert_report(maze: str, episodes: int) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--batch", type=int, default=256)
-    parser.add_argument("--steps", type=int, default=400)
-    parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--expert", type=int, default=0, help="episodes per maze for the expert report")
+    parser = OneLineParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--batch", type=count, default=256)
+    parser.add_argument("--steps", type=count, default=400)
+    parser.add_argument("--rounds", type=count, default=5)
+    parser.add_argument("--threads", type=count, default=1)
+    parser.add_argument("--expert", type=non_negative, default=0, help="episodes per maze for the expert report")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     env = RoverMazeEnv(maze="medium", batch_size=(args.batch,), regime="deploy", seed=0)

@@ -16,13 +16,13 @@ env_options={"command_spread": s})`` (the same simulations for every body: one s
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
 from pathlib import Path
 
 import torch
 
+from torchrl_causal.cli.arguments import OneLineParser, count
 from torchrl_causal.experts.locomotion import evaluate_locomotion
 from torchrl_causal.experts.skills import load_humanoid_locomotion_network
 
@@ -30,10 +30,10 @@ SPREADS: dict[str, float] = {"straight ahead": 0.0, "within pi/4": math.pi / 4, 
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--weights", type=Path, nargs="+", required=True, help="skill bodies (state dicts) to compare")
-    parser.add_argument("--envs", type=int, default=32, help="simulations per spread")
-    parser.add_argument("--steps", type=int, default=400, help="control steps per simulation (40 Hz)")
+    parser.add_argument("--envs", type=count, default=32, help="simulations per spread")
+    parser.add_argument("--steps", type=count, default=400, help="control steps per simulation (40 Hz)")
     args = parser.parse_args(argv)
     missing = [str(path) for path in args.weights if not path.is_file()]
     if missing:

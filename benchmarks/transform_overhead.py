@@ -19,7 +19,6 @@ Run (the figures in results/transform_overhead.md)::
 
 from __future__ import annotations
 
-import argparse
 import os
 import time
 
@@ -28,6 +27,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Composite, Unbounded
 from torchrl.envs import CatFrames, EnvBase, TransformedEnv
 
+from torchrl_causal.cli.arguments import OneLineParser, count, non_negative
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.transforms import CausalWindowTransform
 
@@ -141,13 +141,13 @@ def stored_transitions(n: int, seed: int = 0) -> TensorDict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--k", type=int, default=10)
-    parser.add_argument("--steps", type=int, default=500)
-    parser.add_argument("--repeats", type=int, default=8)
-    parser.add_argument("--transitions", type=int, default=1_000_000)
-    parser.add_argument("--antmaze-steps", type=int, default=2000)
-    parser.add_argument("--offline-threads", type=int, default=1)
+    parser = OneLineParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--k", type=non_negative, default=10)
+    parser.add_argument("--steps", type=count, default=500)
+    parser.add_argument("--repeats", type=count, default=8)
+    parser.add_argument("--transitions", type=count, default=1_000_000)
+    parser.add_argument("--antmaze-steps", type=count, default=2000)
+    parser.add_argument("--offline-threads", type=count, default=1)
     args = parser.parse_args()
     torch.set_num_threads(1)  # the per-step path is latency-bound; one thread keeps runs comparable
     window = causal_window(args.k)

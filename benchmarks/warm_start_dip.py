@@ -25,7 +25,6 @@ critics' distance from the goal-valued fixed point, which 5000 updates do not cl
 
 from __future__ import annotations
 
-import argparse
 import copy
 import time
 from typing import NamedTuple
@@ -33,6 +32,7 @@ from typing import NamedTuple
 import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+from torchrl_causal.cli.arguments import OneLineParser, count
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.experiment.builders import make_window
 from torchrl_causal.experiment.config import compose_config
@@ -70,12 +70,12 @@ def deterministic_actions(trainer: OffPolicyILTrainer, batches: list) -> list[to
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument("--demos", required=True, help="a collected demonstrations folder (demos.path)")
     parser.add_argument("--run-root", required=True, help="a scratch folder for the replay buffer")
     parser.add_argument("--overrides", nargs="*", default=DEFAULT_OVERRIDES)
-    parser.add_argument("--updates", type=int, default=500)
-    parser.add_argument("--episodes", type=int, default=20)
+    parser.add_argument("--updates", type=count, default=500)
+    parser.add_argument("--episodes", type=count, default=20)
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     args = parser.parse_args()
     torch.set_num_threads(1)

@@ -14,10 +14,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from tiny_runs import tiny
+from tiny_runs import merged, tiny
 
 # No budget: the Ctrl-C test sets one long enough to interrupt; progress bars as a user gets them.
-TINY = [*tiny("sqil", "algo.buffer_size=100000"), "progress_bar=true"]
+TINY = tiny("sqil", "algo.buffer_size=100000", "progress_bar=true")
 
 
 @pytest.fixture
@@ -28,7 +28,7 @@ def train_process() -> Iterator[Callable[..., subprocess.Popen]]:
 
     def start(root: Path, *overrides: str) -> subprocess.Popen:
         process = subprocess.Popen(
-            [sys.executable, "-m", "torchrl_causal.train", f"run_root={root}", *TINY, *overrides],
+            [sys.executable, "-m", "torchrl_causal.train", *merged([f"run_root={root}", *TINY, *overrides])],
             cwd=root.parent,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
-from tiny_runs import tiny
+from tiny_runs import merged, tiny
 
 # Imported once here, before the forks. The commands' own modules (torchrl_causal.train...)
 # are not: each case runs its module as __main__, as ``python -m`` does.
@@ -44,6 +44,7 @@ import torchrl_causal.cli.status  # noqa: F401
 import torchrl_causal.cli.strength_ablation  # noqa: F401
 import torchrl_causal.cli.train  # noqa: F401
 
+REPO = Path(__file__).resolve().parents[1]
 TINY_BC = tiny("bc", "algo.epochs=2", "algo.eval_every=1")
 RUN = "rovermaze_u/h40-cs1.0-k2/c_bc/seed0"  # where TINY_BC's run lands below its run root
 MAX_STDERR_LINES = 3
@@ -70,7 +71,10 @@ def _child(module: str, argv: list[str], cwd: Path, out: int, err: int, prepare:
     try:
         if prepare is not None:
             prepare()
-        runpy.run_module(module, run_name="__main__", alter_sys=True)
+        if module.endswith(".py"):  # a script of benchmarks/, as `python benchmarks/<name>.py` runs it
+            runpy.run_path(str(REPO / module), run_name="__main__")
+        else:
+            runpy.run_module(module, run_name="__main__", alter_sys=True)
     except SystemExit as stop:  # what the interpreter does with it
         if stop.code is None or isinstance(stop.code, int):
             return stop.code or 0
@@ -94,6 +98,7 @@ class Case:
     setup: Callable[[Path], None] | None = None
     prepare: Callable[[], None] | None = None
     interrupt_after_s: float | None = None  # SIGINT this long after the start; the run may then hold a checkpoint
+    never_says: str = ""  # e.g. "delete": advice the message must not give (the path is not ours)
     root: Path = field(default=Path())
 
 
@@ -199,6 +204,39 @@ def _remove(relative: str) -> Callable[[Path], None]:
     return change
 
 
+def _user_files(relative: str) -> Callable[[Path], None]:
+    """A folder of the user's own: a document, a subfolder with a file, nothing a run wrote."""
+
+    def change(root: Path) -> None:
+        folder = root / relative
+        (folder / "photos").mkdir(parents=True)
+        (folder / "thesis.tex").write_text("\\chapter{Results}\n")
+        (folder / "photos" / "cat.jpg").write_bytes(bytes(range(256)))
+
+    return change
+
+
+def _edit(relative: str, old: str, new: str) -> Callable[[Path], None]:
+    def change(root: Path) -> None:
+        path = root / relative
+        text = path.read_text()
+        assert old in text, (old, path)
+        path.write_text(text.replace(old, new))
+
+    return change
+
+
+def _nudge_weights(root: Path) -> None:
+    """The selected policy's weights changed by a little, still loadable: an edited best.pt."""
+    import torch
+
+    path = root / RUN / "checkpoints" / "best.pt"
+    state = torch.load(path, weights_only=True)
+    name = sorted(state["policy"])[0]
+    state["policy"][name] = state["policy"][name] + 1e-3
+    torch.save(state, path)
+
+
 def _demos_dir(root: Path) -> Path:
     return next((root / "_demos").iterdir())
 
@@ -217,12 +255,21 @@ def _cases(trained: Path) -> list[Case]:
     run = _copy_of(trained)
     fresh = ["run_root={root}/runs", *TINY_BC]
     rerun = ["run_root={root}", *TINY_BC]
+
+    # A key of TINY_BC named again takes the case's value (the command line refuses a key given twice).
+    def fresh_with(*extra: str) -> list[str]:
+        return merged([*fresh, *extra])
+
+    def rerun_with(*extra: str) -> list[str]:
+        return merged([*rerun, *extra])
+
     T, E, R, S = "torchrl_causal.train", "torchrl_causal.evaluate", "torchrl_causal.report", "torchrl_causal.status"
     A, F, X = "torchrl_causal.strength_ablation", "torchrl_causal.filmstrip", "torchrl_causal.archive"
+    B = "benchmarks/transform_overhead.py"
     in_run = f"{{root}}/{RUN}"
     return [
         # ---- train: sizes, keys, budgets, files
-        Case("train window longer than horizon", T, [*fresh, "window.k=100000"], "window.k=100000 must be < env.horizon"),
+        Case("train window longer than horizon", T, fresh_with("window.k=100000"), "window.k=100000 must be < env.horizon"),
         Case("train +typo key", T, [*fresh, "+windw.k=2"], "config key windw.k is unknown"),
         Case("train typo key", T, [*fresh, "windw.k=2"], "windw"),
         Case("train seed not a number", T, [*fresh, "seed=abc"], "seed=abc"),
@@ -249,7 +296,38 @@ def _cases(trained: Path) -> list[Case]:
             ),
         ),
         Case("train status corrupted", T, rerun, "status.json", setup=_then(run, _write(f"{RUN}/status.json", b"{"))),
-        Case("train config changed", T, [*rerun, "algo.batch_size=7"], "holds a run of another config", setup=run),
+        Case("train config changed", T, rerun_with("algo.batch_size=7"), "holds a run of another config", setup=run),
+        # ---- train: a folder that is not a run's is neither cleared nor written into
+        Case(
+            "train resume=false over the user's files",
+            T,
+            [*TINY_BC, "run_dir={root}/mine", "resume=false"],
+            "which no run wrote",
+            setup=_user_files("mine"),
+        ),
+        Case(
+            "train resume=true over the user's files",
+            T,
+            [*TINY_BC, "run_dir={root}/mine", "resume=true"],
+            "which no run wrote",
+            setup=_user_files("mine"),
+        ),
+        Case(
+            "train over another program's config.yaml",
+            T,
+            [*TINY_BC, "run_dir={root}/mine", "resume=false"],
+            "config.yaml",
+            setup=_write("mine/config.yaml", b"model: resnet50\n"),
+        ),
+        Case("train key given twice", T, [*fresh, "seed=1", "seed=2"], "seed is given twice"),
+        Case(
+            "train demos.path is a file",
+            T,
+            [*fresh, "demos.path={root}/afile"],
+            "not a demonstration set",
+            setup=_write("afile", b"x"),
+            never_says="delete",
+        ),
         # ---- evaluate
         Case("evaluate unknown regime", E, [f"run_dir={in_run}", "regime=foo"], "regime='foo' must be one of", setup=run),
         Case("evaluate zero episodes", E, [f"run_dir={in_run}", "episodes=0"], "episodes=0", setup=run),
@@ -281,6 +359,36 @@ def _cases(trained: Path) -> list[Case]:
         Case("evaluate unknown argument", E, [f"run_dir={in_run}", "episodez=3"], "episodez", setup=run),
         Case("evaluate zero threads", E, [f"run_dir={in_run}", "threads=0"], "threads=0", setup=run),
         Case("evaluate missing device", E, [f"run_dir={in_run}", "device=cuda:9"], "cuda:9", setup=run),
+        Case("evaluate key given twice", E, [f"run_dir={in_run}", "episodes=4", "episodes=8"], "episodes is given twice", setup=run),
+        # ---- evaluate: a run's config, window and weights are checked against each other
+        Case(
+            "evaluate config edited (digests recorded)",
+            E,
+            [f"run_dir={in_run}", "episodes=2"],
+            "config.yaml changed since its policy was selected",
+            setup=_then(run, _edit(f"{RUN}/config.yaml", "\nseed: 0\n", "\nseed: 5\n")),
+        ),
+        Case(
+            "evaluate weights edited",
+            E,
+            [f"run_dir={in_run}", "episodes=2"],
+            "best.pt changed since its policy was selected",
+            setup=_then(run, _nudge_weights),
+        ),
+        Case(
+            "evaluate another maze (no digests)",
+            E,
+            [f"run_dir={in_run}", "episodes=2"],
+            "another maze",
+            setup=_then(_then(run, _remove(f"{RUN}/checkpoints/best.json")), _edit(f"{RUN}/config.yaml", "maze: u", "maze: medium")),
+        ),
+        Case(
+            "evaluate window edited (no digests)",
+            E,
+            [f"run_dir={in_run}", "episodes=2"],
+            "window.json is not the window",
+            setup=_then(_then(run, _remove(f"{RUN}/checkpoints/best.json")), _edit(f"{RUN}/window.json", '"k": 2', '"k": 3')),
+        ),
         # ---- report
         Case("report missing runs", R, ["runs={root}/nowhere"], "nowhere"),
         Case("report no runs", R, ["runs={root}"], "no evaluated runs", setup=_write("x.txt", b"x")),
@@ -328,6 +436,15 @@ def _cases(trained: Path) -> list[Case]:
         Case("archive out inside runs", X, ["runs={root}", "out={root}/inside"], "must not contain", setup=run),
         Case("archive out is a file", X, ["runs={root}/rovermaze_u", "out={root}/afile"], "afile", setup=_then(run, _write("afile", b"x"))),
         Case("archive missing out", X, ["runs={root}"], "out=", setup=run),
+        Case(
+            "archive over the user's files",
+            X,
+            ["runs={root}/rovermaze_u", "out={root}/archive"],
+            "notes.txt",
+            setup=_then(run, _write(f"archive/{RUN.removeprefix('rovermaze_u/')}/notes.txt", b"mine")),
+        ),
+        # ---- benchmarks
+        Case("benchmark negative count", B, ["--steps", "-5"], "--steps: -5 must be an integer >= 1"),
     ]
 
 
@@ -338,7 +455,8 @@ def trained(tmp_path_factory) -> Path:
 
 def test_every_bad_input_fails_with_one_line_and_leaves_the_run_root_as_it_was(trained: Path, tmp_path: Path) -> None:
     cases = _cases(trained)
-    assert len(cases) >= 40 and {c.module.split(".")[-1] for c in cases} == {
+    assert len(cases) >= 40 and {c.module.removesuffix(".py").split(".")[-1].split("/")[0] for c in cases} == {
+        "benchmarks",
         "train",
         "evaluate",
         "report",
@@ -369,6 +487,8 @@ def test_every_bad_input_fails_with_one_line_and_leaves_the_run_root_as_it_was(t
             problems.append(f"{len(lines)} lines on stderr")
         if case.says.lower() not in outcome.stderr.lower():
             problems.append(f"no {case.says!r}")
+        if case.never_says and case.never_says.lower() in outcome.stderr.lower():
+            problems.append(f"says {case.never_says!r}")
         after = _snapshot(case.root)
         resumable = case.interrupt_after_s is not None and all(
             json.loads(path.read_text())["status"] == "interrupted" for path in case.root.rglob("status.json")
@@ -401,3 +521,77 @@ def test_a_fresh_interpreter_agrees(trained: Path, tmp_path: Path) -> None:
             timeout=300,
         )
         assert (real.returncode, real.stderr.strip()) == (forked[case.name].code, forked[case.name].stderr.strip())
+
+
+def test_archive_replaces_only_the_files_it_writes(trained: Path, tmp_path: Path) -> None:
+    """Archiving again over an archive replaces its records and removes an earlier run's stale
+    evaluation record, and leaves every other file found in the run's folders as it was."""
+    from torchrl_causal.evaluation.runs import archive_runs
+
+    root, out = tmp_path / "runs", tmp_path / "out"
+    _copy_of(trained)(root)
+    archive_runs(root, out)
+    target = out / RUN
+    stale = target / "eval" / "deploy-n3-seed9-envs3.json"  # an earlier run's record at a setting this one lacks
+    stale.write_text((target / "eval" / "deploy.json").read_text())
+    mine = {
+        target / "eval" / "notes.txt": b"my reading of these numbers",
+        target / "eval" / "plot_settings.json": b'{"dpi": 300}',
+        target / "logs" / "README.md": b"# mine",
+    }
+    for path, data in mine.items():
+        path.write_bytes(data)
+    archive_runs(root, out)
+    assert not stale.exists()
+    assert {path: path.read_bytes() for path in mine} == mine
+    assert (target / "eval" / "deploy.json").read_bytes() == (root / RUN / "eval" / "deploy.json").read_bytes()
+
+
+def test_a_shipped_policy_is_evaluated_without_writing_into_the_package(
+    trained: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A run directory in the package's results tree is only read: the record goes below the
+    user's run root, and the command says where."""
+    import torchrl_causal.lifecycle as lifecycle
+    from torchrl_causal.cli.evaluate import main as evaluate_main
+
+    assert lifecycle.PACKAGE_RESULTS == REPO / "results"
+    results = (tmp_path / "results").resolve()
+    _copy_of(trained)(results / "policies")
+    monkeypatch.setattr(lifecycle, "PACKAGE_RESULTS", results)
+    before = _snapshot(results)
+    shipped = results / "policies" / RUN
+    argv = [f"run_dir={shipped}", "episodes=2", f"run_root={tmp_path / 'mine'}"]
+    first = evaluate_main(argv)
+    record = tmp_path / "mine" / "evaluated" / "policies" / RUN / "eval" / "deploy-n2-seed30000-envs2.json"
+    assert record.is_file() and f"record: {record}" in capsys.readouterr().out
+    assert _snapshot(results) == before
+    assert evaluate_main([*argv, "reuse=true"]).successes == first.successes  # read back from there
+    assert _snapshot(results) == before
+
+
+def test_every_benchmark_checks_its_numbers() -> None:
+    """Every benchmark parses its flags with the shared one-line parser, its numbers typed with
+    bounds (a negative count is refused, not timed)."""
+    scripts = sorted((REPO / "benchmarks").glob("*.py"))
+    with_flags = [path for path in scripts if "add_argument(" in path.read_text()]
+    assert len(with_flags) >= 10
+    for path in with_flags:
+        text = path.read_text()
+        assert "OneLineParser(" in text and "argparse.ArgumentParser(" not in text, path.name
+        assert "type=int" not in text and "type=float" not in text, path.name
+
+
+def test_every_shipped_policy_agrees_with_its_run_files() -> None:
+    """Each policy in ``results/policies`` records the digests of its weights, config and window
+    (``checkpoints/best.json``), and its config, window, weights and final records pass the
+    checks ``evaluate`` makes before it evaluates (an edited file is refused, see the cases)."""
+    from torchrl_causal.experiment import RunDirectory
+    from torchrl_causal.lifecycle import open_run
+
+    shipped = sorted(path.parent.parent for path in (REPO / "results" / "policies").rglob("checkpoints/best.pt"))
+    assert len(shipped) >= 10
+    for run_dir in shipped:
+        assert RunDirectory(run_dir).policy_identity_file.is_file(), run_dir
+        _, _, policy = open_run(run_dir, device="cpu")
+        assert policy is not None

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import torch
 from test_trainers import TINY
-from tiny_runs import ALGO
+from tiny_runs import ALGO, merged
 
 from torchrl_causal.evaluation import load_runs
 from torchrl_causal.experiment import load_checkpoint
@@ -23,13 +23,13 @@ pytest.importorskip(
 )
 
 REPO = Path(__file__).resolve().parents[1]
-SWEEP = ["-m", "env=route_choice", "algo=bc", "causal=true", "seed=0,1", *TINY, *ALGO["bc"]]
+SWEEP = ["-m", *merged(["env=route_choice", "algo=bc", "causal=true", "seed=0,1", *TINY, *ALGO["bc"]])]
 
 
 def run_sweep(root: Path, *extra: str) -> None:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
     done = subprocess.run(
-        [sys.executable, "-m", "torchrl_causal.train", *SWEEP, f"run_root={root}", *extra],
+        [sys.executable, "-m", "torchrl_causal.train", "-m", *merged([*SWEEP[1:], f"run_root={root}", *extra])],
         capture_output=True,
         text=True,
         env=env,

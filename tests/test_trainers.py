@@ -28,6 +28,7 @@ from torchrl_causal.experiment import (
     CheckpointError,
     ConfigMismatchError,
     ConfigValueError,
+    ForeignFilesError,
     RunDirectory,
     RunInterrupted,
     RunInUseError,
@@ -182,13 +183,23 @@ def test_an_unfinished_run_refuses_a_changed_width_before_writing(tmp_path: Path
     assert (Path(cfg.run_dir) / "checkpoints" / "last.pt").read_bytes() == checkpoint
 
 
-def test_resume_false_discards_the_previous_run(trained_runs, tmp_path: Path) -> None:
+def test_resume_false_discards_the_previous_run_and_nothing_else(trained_runs, tmp_path: Path) -> None:
     cfg = tiny_config(tmp_path, "route_choice", "bc", True)
     run(cfg)
-    (Path(cfg.run_dir) / "stale").write_text("")
+    stale = Path(cfg.run_dir) / "eval" / "deploy-n5-seed1-envs5.json"  # a record of the previous run's
+    stale.write_text((Path(cfg.run_dir) / "eval" / "deploy.json").read_text())
     run(tiny_config(tmp_path, "route_choice", "bc", True, "algo.optimizer.lr=0.01", "resume=false"))
-    assert not (Path(cfg.run_dir) / "stale").exists()
+    assert not stale.exists()
     assert OmegaConf.load(Path(cfg.run_dir) / "config.yaml").algo.optimizer.lr == 0.01
+    # A file no run wrote: resume=false removes nothing, resume=true writes nothing beside it.
+    mine = Path(cfg.run_dir) / "notes.txt"
+    mine.write_text("my notes")
+    before = {path: path.read_bytes() for path in Path(cfg.run_dir).rglob("*") if path.is_file() and path.name != ".lock"}
+    for resume in ("false", "true"):
+        with pytest.raises(ForeignFilesError, match="notes.txt") as error:
+            run(tiny_config(tmp_path, "route_choice", "bc", True, "algo.optimizer.lr=0.02", f"resume={resume}"))
+        assert "\n" not in str(error.value)
+    assert {path: path.read_bytes() for path in Path(cfg.run_dir).rglob("*") if path.is_file() and path.name != ".lock"} == before
 
 
 def test_a_run_held_by_another_process_is_refused_and_a_killed_holder_leaves_no_lock(tmp_path: Path) -> None:

@@ -1,6 +1,6 @@
 """The smallest runs that still pass through every code path: the Hydra overrides shared by
-the tests that train. Hydra applies overrides in order, so a test adds its own after these
-and a key it names again takes the test's value."""
+the tests that train. A test adds its own after these, and a key it names again takes the
+test's value: :func:`tiny` merges them, since the command line refuses a key given twice."""
 
 from __future__ import annotations
 
@@ -41,7 +41,21 @@ def tiny(algo: str, *extra: str, env: list[str] = ROVER) -> list[str]:
     """The overrides of a tiny ``algo`` run on ``env`` (RoverMaze-U, 40 steps, k = 2), then ``extra``.
 
     Examples:
-        >>> tiny("bc", "algo.epochs=2")[:4], tiny("bc", "algo.epochs=2")[-1]
-        (['env=rovermaze_u', 'env.horizon=40', 'window.k=2', 'algo=bc'], 'algo.epochs=2')
+        >>> tiny("bc", "algo.epochs=2")[:4], "algo.epochs=2" in tiny("bc", "algo.epochs=2"), "algo.epochs=3" in tiny("bc")
+        (['env=rovermaze_u', 'env.horizon=40', 'window.k=2', 'algo=bc'], True, True)
     """
-    return [*env, f"algo={algo}", *QUICK, *ALGO[algo], *extra]
+    return merged([*env, f"algo={algo}", *QUICK, *ALGO[algo], *extra])
+
+
+def merged(overrides: list[str]) -> list[str]:
+    """``overrides`` with each key once, at its first place, with its last value (what Hydra
+    does with a key given twice, which the command line refuses).
+
+    Examples:
+        >>> merged(["a=1", "b=2", "a=3"])
+        ['a=3', 'b=2']
+    """
+    by_key: dict[str, str] = {}
+    for override in overrides:
+        by_key[override.split("=", 1)[0].lstrip("+~")] = override
+    return list(by_key.values())

@@ -15,7 +15,7 @@ the training step in flight, checkpoints, marks the run interrupted and raises
 from __future__ import annotations
 
 import logging
-import shutil
+import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -41,7 +41,18 @@ from torchrl_causal.experiment.schema import ConfigValueError, validate_config
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.trainers.base import Trainer
 
-__all__ = ["DEFAULT_THREADS", "REGIMES", "evaluate_run", "open_run", "record_settings", "run"]
+__all__ = [
+    "DEFAULT_THREADS",
+    "EVALUATED_DIR",
+    "PACKAGE_RESULTS",
+    "REGIMES",
+    "evaluate_run",
+    "evaluation_home",
+    "evaluation_record",
+    "open_run",
+    "record_settings",
+    "run",
+]
 
 log = logging.getLogger("torchrl_causal")
 
@@ -91,11 +102,13 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
         ConfigValueError: a value out of range (nothing is written).
         DatasetError: demonstrations of another env, missing keys or corrupted (nothing is written).
         ConfigMismatchError: ``cfg.run_dir`` holds a run of another config (nothing is written).
+        ForeignFilesError: ``cfg.run_dir`` holds files no run wrote (nothing is written or removed).
         RunInUseError: another process is running ``cfg.run_dir`` (nothing is written).
         RunInterrupted: on SIGINT/SIGTERM/SIGUSR2, after checkpointing and marking the run interrupted.
     """
     validate_config(cfg)
     _check_run_root(Path(cfg.run_dir))
+    RunDirectory(cfg.run_dir).check_owned()  # a folder of the user's own files is neither cleared nor written into
     check_run_fits(cfg)  # before the window: a long one takes long to build
     trainer_class: type[Trainer] | None = get_class(cfg.algo.trainer) if cfg.algo.trainer else None
     total = trainer_class.budget(cfg) if trainer_class else 0
@@ -114,6 +127,20 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
             run_dir.discard()
             created = created or run_dir.path
         return _claim_and_run(cfg, run_dir, trainer_class, window, total, created)
+
+
+def _remove_new_run(run_dir: RunDirectory, created: Path) -> None:
+    """Removes what this attempt made of a run that failed before its first checkpoint: the
+    run's own entries, then each folder from the run directory up to ``created`` (the
+    outermost one it made) that is left empty. Anything else found there stays."""
+    run_dir.discard(keep_lock=False)
+    for folder in (run_dir.path, *run_dir.path.parents):
+        try:
+            folder.rmdir()
+        except OSError:  # not empty (something that is not the run's), or gone already
+            break
+        if folder == created:
+            break
 
 
 def _check_run_root(run_dir: Path) -> None:
@@ -151,11 +178,11 @@ def _claim_and_run(
         except (CheckpointError, DatasetError):
             # a file to fix before the run can go on: the run stays as it was (a new one is removed)
             if created is not None and not run_dir.last_checkpoint.is_file():
-                shutil.rmtree(created, ignore_errors=True)
+                _remove_new_run(run_dir, created)
             raise
         except Exception as error:
             if created is not None and not run_dir.last_checkpoint.is_file():
-                shutil.rmtree(created, ignore_errors=True)  # leave no half-made run directory behind
+                _remove_new_run(run_dir, created)  # leave no half-made run directory behind
             else:
                 run_dir.update_status("failed", error=f"{type(error).__name__}: {error}")
             raise
@@ -233,8 +260,27 @@ def open_run(
         except ValueError:
             cfg.device, resolved = "cpu", torch.device("cpu")
     window = AdjustmentWindow.from_dict(run.read_json(run.window_file)) if cfg.algo.trainer else None
+    if window is not None:
+        _check_window(run, cfg, window)
     evaluator = Evaluator(cfg, window, progress=True, device=resolved)
+    evaluator.check_records(run)
     return run, evaluator, evaluator.load_best_policy(run) if window is not None else None
+
+
+def _check_window(run: RunDirectory, cfg: DictConfig, window: AdjustmentWindow) -> None:
+    """Refuses a ``window.json`` other than the window the run's config gives (an edited
+    window, or a config edited to another env or ``window.k``): the policy reads its inputs
+    through that window."""
+    try:
+        expected = make_window(cfg)
+    except ConfigValueError as error:
+        raise CheckpointError(f"{run.config_file} no longer gives a window ({error}): it was edited; nothing was evaluated") from None
+    if expected.to_dict() != window.to_dict():
+        raise CheckpointError(
+            f"{run.window_file} is not the window that {run.config_file} gives (window.k {cfg.window.k}, env.name "
+            f"{cfg.env.name!r}): one of them was edited; nothing was evaluated; restore the run's files (an archive keeps a copy) "
+            "or train the run again"
+        )
 
 
 def _check_evaluation(regime: str, episodes: int, num_envs: int | None, trajectories: int, confounding_strength: float | None) -> None:
@@ -245,6 +291,54 @@ def _check_evaluation(regime: str, episodes: int, num_envs: int | None, trajecto
             raise InvalidValueError(f"{name}={value} is out of range: it must be >= {least}")
     if confounding_strength is not None and not 0.0 <= float(confounding_strength) <= 1.0:
         raise InvalidValueError(f"confounding_strength={confounding_strength} is out of range: it must lie in [0, 1]")
+
+
+#: The package's own results tree (a git checkout's ``results/``): shipped runs and policies, never written by a command.
+PACKAGE_RESULTS = Path(__file__).resolve().parent.parent / "results"
+#: Below a run root, where evaluations of runs that are not ours to write into are kept.
+EVALUATED_DIR = "evaluated"
+
+
+def evaluation_home(run_dir: str | Path, run_root: str | Path = "runs") -> Path:
+    """The folder whose ``eval/`` receives :func:`evaluate_run`'s records of ``run_dir``.
+
+    The run directory itself when it is ours to write into: writable, holding nothing a
+    run did not write (:meth:`~torchrl_causal.experiment.RunDirectory.foreign_entries`) and
+    outside the package's results tree. A shipped policy (``results/policies/...``) or a run
+    directory of someone else's is read only: its records go below the user's
+    ``run_root``, at ``<run_root>/evaluated/<its path below results/>`` or
+    ``<run_root>/evaluated/<its run_name>``.
+
+    Examples:
+        >>> str(evaluation_home(PACKAGE_RESULTS / "policies/antmaze_medium/h1000-cs1.0-k10/sqil/seed0", "runs"))
+        'runs/evaluated/policies/antmaze_medium/h1000-cs1.0-k10/sqil/seed0'
+    """
+    path = Path(run_dir)
+    resolved = path.resolve()
+    if resolved.is_relative_to(PACKAGE_RESULTS):
+        return Path(run_root) / EVALUATED_DIR / resolved.relative_to(PACKAGE_RESULTS)
+    run = RunDirectory(path)
+    writable = os.access(path, os.W_OK) and (not (path / "eval").exists() or os.access(path / "eval", os.W_OK))
+    if writable and not run.foreign_entries():
+        return path
+    return Path(run_root) / EVALUATED_DIR / str(run.read_config().run_name)
+
+
+def evaluation_record(
+    run_dir: str | Path,
+    regime: str = "deploy",
+    episodes: int = 1000,
+    *,
+    num_envs: int | None = None,
+    seed: int = 30_000,
+    confounding_strength: float | None = None,
+    run_root: str | Path = "runs",
+) -> Path:
+    """Where :func:`evaluate_run` with these settings writes its record (see :func:`evaluation_home`)."""
+    stored = RunDirectory(run_dir)
+    num_envs = min(int(stored.read_config().eval.num_envs if num_envs is None else num_envs), int(episodes))
+    settings = record_settings(int(episodes), int(seed), num_envs, confounding_strength)
+    return RunDirectory(evaluation_home(run_dir, run_root)).eval_path(regime, settings)
 
 
 def evaluate_run(
@@ -259,21 +353,33 @@ def evaluate_run(
     save: bool = True,
     reuse: bool = False,
     device: str | None = None,
+    run_root: str | Path = "runs",
 ) -> EvaluationResult:
     """Evaluates the selected policy of ``run_dir`` (see the module docstring); with
-    ``reuse=True`` a stored record of the same settings is returned instead.
+    ``reuse=True`` a stored record of the same settings is returned instead. The record is
+    written to :func:`evaluation_record` (below ``run_root`` for a shipped policy).
+
+    Before evaluating, the run's config, window, weights and final records are checked
+    against each other (and against the digests of ``checkpoints/best.json`` when the run
+    recorded them): an edited file is refused, not evaluated under the run's name.
 
     Raises:
         ValueError: naming ``device`` when it is given and this machine lacks it, or a
             value out of range (``regime``, ``episodes``, ``num_envs``, ``trajectories``,
             ``confounding_strength``).
+        CheckpointError: the run's files do not agree with each other.
     """
     _check_evaluation(regime, episodes, num_envs, trajectories, confounding_strength)
     stored = RunDirectory(run_dir)
     num_envs = min(int(stored.read_config().eval.num_envs if num_envs is None else num_envs), int(episodes))
-    record = stored.eval_path(regime, record_settings(int(episodes), int(seed), num_envs, confounding_strength))
-    if reuse and record.is_file():
-        return EvaluationResult.from_dict(stored.read_json(record))
+    settings = record_settings(int(episodes), int(seed), num_envs, confounding_strength)
+    record = evaluation_record(
+        run_dir, regime, episodes, num_envs=num_envs, seed=seed, confounding_strength=confounding_strength, run_root=run_root
+    )
+    if reuse:
+        for found in (stored.eval_path(regime, settings), record):  # the run's own record first (an archive's)
+            if found.is_file():
+                return EvaluationResult.from_dict(stored.read_json(found))
     run, evaluator, policy = open_run(run_dir, confounding_strength=confounding_strength, device=device)
     result = evaluator.evaluate(policy, regime, int(episodes), int(seed), trajectories=int(trajectories), num_envs=num_envs)
     if save:

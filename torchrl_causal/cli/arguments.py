@@ -25,9 +25,10 @@ Examples:
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, cast
@@ -37,7 +38,21 @@ from omegaconf.errors import OmegaConfBaseException
 
 from torchrl_causal.errors import InvalidTypeError
 
-__all__ = ["REQUIRED", "Option", "argv_or_sys", "one_line_errors", "parse_arguments", "usage"]
+__all__ = [
+    "REQUIRED",
+    "OneLineParser",
+    "Option",
+    "argv_or_sys",
+    "bounded",
+    "count",
+    "non_negative",
+    "non_negative_number",
+    "positive_number",
+    "one_line_errors",
+    "parse_arguments",
+    "refuse_repeated_keys",
+    "usage",
+]
 
 #: The default of an argument that must be given.
 REQUIRED: Any = object()
@@ -108,15 +123,41 @@ def _check(name: str, value: Any, option: Option) -> None:
         raise SystemExit(f"error: {name}={value!r} is out of range: it must be <= {option.le:g}")
 
 
+def refuse_repeated_keys(argv: Sequence[str]) -> None:
+    """Refuses a ``key=value`` argument whose key was given before (Hydra's ``+``/``++``/``~``
+    prefixes aside): OmegaConf and Hydra would keep the last value without a word, so
+    ``episodes=4 episodes=8`` would run what the user may not have meant.
+
+    Raises:
+        SystemExit: one line naming the key and both arguments.
+
+    Examples:
+        >>> refuse_repeated_keys(["episodes=4", "seed=1", "-m"])
+        >>> refuse_repeated_keys(["episodes=4", "episodes=8"])
+        Traceback (most recent call last):
+        ...
+        SystemExit: error: episodes is given twice (episodes=4, then episodes=8): give it once
+    """
+    seen: dict[str, str] = {}
+    for argument in argv:
+        if "=" not in argument or argument.startswith("-"):
+            continue
+        key = argument.split("=", 1)[0].lstrip("+~")
+        if key in seen:
+            raise SystemExit(f"error: {key} is given twice ({seen[key]}, then {argument}): give it once")
+        seen[key] = argument
+
+
 def parse_arguments(command: str, argv: Sequence[str], options: Mapping[str, Option]) -> dict[str, Any]:
     """The typed value of every option (its default when not given).
 
     Raises:
         SystemExit: with the usage line for an unknown or missing argument or a malformed
             one; with one line naming the argument for a value of the wrong type or out
-            of range.
+            of range, or for a key given twice (:func:`refuse_repeated_keys`).
     """
     line = usage(command, options)
+    refuse_repeated_keys(argv)
     try:
         # from_cli builds a DictConfig, whose container is a dict keyed by the argument names.
         args = cast(dict[str, Any], OmegaConf.to_container(OmegaConf.from_cli(list(argv))))
@@ -184,3 +225,68 @@ def one_line_errors(*user_errors: type[BaseException]) -> Iterator[None]:
 def argv_or_sys(argv: Sequence[str] | None) -> list[str]:
     """``argv``, or the process's own arguments when it is ``None``."""
     return list(sys.argv[1:] if argv is None else argv)
+
+
+# ---------------------------------------------------------------------- the benchmarks' argparse flags
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An :class:`argparse.ArgumentParser` whose refusals are one line (``error: ...``, exit
+    status 2), as the package's commands answer: what the scripts in ``benchmarks/`` parse
+    their ``--flags`` with, typed by :func:`bounded` (:data:`count`, :data:`non_negative`...).
+
+    Examples:
+        >>> parser = OneLineParser(prog="bench")
+        >>> _ = parser.add_argument("--steps", type=count, default=10)
+        >>> parser.parse_args(["--steps", "3"]).steps
+        3
+        >>> parser.parse_args(["--steps", "-5"])
+        Traceback (most recent call last):
+        ...
+        SystemExit: 2
+    """
+
+    def error(self, message: str) -> None:  # type: ignore[override]  # argparse's own is NoReturn too
+        self.exit(2, f"error: {message} (python {self.prog} --help lists the options)\n")
+
+
+def bounded(kind: type, *, ge: float | None = None, gt: float | None = None) -> Callable[[str], Any]:
+    """An argparse ``type=`` that reads ``kind`` (``int`` or a finite ``float``) and refuses a
+    value below ``ge`` or not above ``gt``, naming it.
+
+    Examples:
+        >>> count("4"), non_negative("0"), positive_number("0.5")
+        (4, 0, 0.5)
+        >>> count("-5")
+        Traceback (most recent call last):
+        ...
+        argparse.ArgumentTypeError: -5 must be an integer >= 1
+        >>> positive_number("nan")
+        Traceback (most recent call last):
+        ...
+        argparse.ArgumentTypeError: nan must be a finite number > 0
+    """
+    name = "an integer" if kind is int else "a finite number"
+    bound = f" >= {ge:g}" if ge is not None else f" > {gt:g}" if gt is not None else ""
+
+    def read(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text} must be {name}{bound}") from None
+        if (kind is float and not math.isfinite(value)) or (ge is not None and value < ge) or (gt is not None and value <= gt):
+            raise argparse.ArgumentTypeError(f"{text} must be {name}{bound}")
+        return value
+
+    read.__name__ = f"{kind.__name__}{bound.replace(' ', '')}"  # what argparse names in its messages
+    return read
+
+
+#: A count of things (steps, rounds, episodes, threads): an integer >= 1.
+count = bounded(int, ge=1)
+#: A seed, a window size, an optional number of things: an integer >= 0.
+non_negative = bounded(int, ge=0)
+#: A rate, a length, a radius: a finite number > 0.
+positive_number = bounded(float, gt=0)
+#: A clearance, a height: a finite number >= 0.
+non_negative_number = bounded(float, ge=0)

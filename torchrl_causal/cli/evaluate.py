@@ -8,7 +8,10 @@ episodes in batches of ``num_envs`` (default: the run's ``eval.num_envs``), seed
 SE, raw E[Y] ± std and the length of successful episodes, and (unless ``save=false``)
 writes the record to ``<run_dir>/eval/<regime>-<settings>.json``, named after every
 setting that changes the numbers: the final evaluation of training
-(``eval/<regime>.json``, what the report reads) is never replaced.
+(``eval/<regime>.json``, what the report reads) is never replaced. A run directory that is not
+ours to write into (a shipped policy in ``results/policies/``, a read-only or shared folder) is
+only read: its record goes to ``<run_root>/evaluated/...`` (``run_root=runs`` by default), and
+the command prints where.
 ``device=<cpu|cuda|...>`` picks where the policy runs; by default the run's own device
 when this machine has it, else the CPU (a run trained on a GPU evaluates anywhere).
 ``threads=<n>`` (default 1, as training's ``threads``) sets ``torch.set_num_threads``. Torch's
@@ -27,7 +30,7 @@ import torch
 from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.experiment.run_directory import CheckpointError
-from torchrl_causal.lifecycle import DEFAULT_THREADS, REGIMES, evaluate_run
+from torchrl_causal.lifecycle import DEFAULT_THREADS, REGIMES, evaluate_run, evaluation_record
 
 __all__ = ["OPTIONS", "main"]
 
@@ -43,6 +46,7 @@ OPTIONS: dict[str, Option] = {
     "reuse": Option(bool, False),
     "device": Option(str, None, placeholder="<the run's, else cpu>"),
     "threads": Option(int, DEFAULT_THREADS, ge=1),
+    "run_root": Option(str, "runs"),
 }
 
 
@@ -58,11 +62,22 @@ def main(argv: Sequence[str] | None = None) -> EvaluationResult:
     torch.set_num_threads(args.pop("threads"))
     with one_line_errors(CheckpointError):
         result = evaluate_run(**args)
+        record = evaluation_record(
+            args["run_dir"],
+            args["regime"],
+            args["episodes"],
+            num_envs=args["num_envs"],
+            seed=args["seed"],
+            confounding_strength=args["confounding_strength"],
+            run_root=args["run_root"],
+        )
     print(
         f"{args['run_dir']} [{result.regime}] episodes {result.n_episodes}: success {100 * result.success_rate:.1f}% "
         f"± {100 * result.success_se:.1f}, E[Y] {result.return_mean:.1f} ± {result.return_std:.1f}, "
         f"successful episode length {_pm(result.ep_len_mean, result.ep_len_std, 0)}"
     )
+    if args["save"] and record.is_file():
+        print(f"record: {record}")
     return result
 
 

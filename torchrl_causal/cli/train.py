@@ -21,7 +21,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from torchrl_causal.cli.arguments import one_line_errors
+from torchrl_causal.cli.arguments import one_line_errors, refuse_repeated_keys
 from torchrl_causal.experiment.config import CONFIG_NAME, CONFIG_PATH
 from torchrl_causal.experiment.interrupts import RunInterrupted
 from torchrl_causal.experiment.run_directory import CheckpointError, RunInUseError
@@ -46,7 +46,9 @@ def main(cfg: DictConfig) -> float:
 
 def entry_point() -> None:
     """``main`` as the command line runs it: a Ctrl-C while Hydra composes the config (before
-    :func:`main` handles signals) stops with one line too."""
+    :func:`main` handles signals) stops with one line too, and so does a key given twice
+    (Hydra would keep the last value silently)."""
+    refuse_repeated_keys(sys.argv[1:])
     try:
         main()
     except KeyboardInterrupt:

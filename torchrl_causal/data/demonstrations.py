@@ -223,6 +223,11 @@ def collect_demonstrations(
     path = Path(path)
     if path.exists() and not overwrite:
         raise ExistingFileError(f"a dataset already exists at {path} (pass overwrite=True to replace it)")
+    if path.exists() and not (path / _METADATA_FILE).is_file():
+        # overwrite replaces a set this package wrote, never a file or folder of anything else
+        raise ExistingFileError(
+            f"{path} exists and is not a demonstration set (no {_METADATA_FILE}): nothing was changed; choose another path"
+        )
     if seed is not None:
         env.set_seed(seed)
     data = _flatten(_rollout_episodes(env, policy, episodes, progress))

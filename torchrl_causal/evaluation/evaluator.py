@@ -11,6 +11,7 @@ for evaluations with other settings.
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import torch
@@ -21,7 +22,7 @@ from torchrl.envs import EnvBase
 from torchrl_causal.evaluation.metrics import EvaluationResult, Policy, evaluate_policy
 from torchrl_causal.experiment.builders import make_env, make_expert, make_imitator_env, make_policy
 from torchrl_causal.experiment.device import for_cpu_env, resolve_device
-from torchrl_causal.experiment.run_directory import CheckpointError, RunDirectory
+from torchrl_causal.experiment.run_directory import CONFIG_FILE, WINDOW_FILE, CheckpointError, RunDirectory
 from torchrl_causal.graphs.window import AdjustmentWindow
 
 __all__ = ["Evaluator", "maze_geometry", "PERIODIC_EVAL_SEED", "FINAL_EVAL_SEED"]
@@ -54,6 +55,26 @@ def maze_geometry(env: EnvBase) -> dict[str, Any] | None:
         "start": position("start_position"),
         "goal": position("goal_position"),
     }
+
+
+_UNRECORDED = object()
+
+
+def _check_weights_fit(run: RunDirectory, expected: dict[str, torch.Tensor], found: dict[str, torch.Tensor]) -> None:
+    """Refuses weights of another shape than the policy the run's config and window build
+    (an edited ``window.json`` or ``config.yaml``), naming the first difference."""
+    names = sorted(set(expected) ^ set(found))
+    if names:
+        what = f"parameter {names[0]!r} is {'missing from' if names[0] in expected else 'unknown to'} them"
+    else:
+        name = next((n for n in sorted(expected) if tuple(expected[n].shape) != tuple(found[n].shape)), None)
+        if name is None:
+            return
+        what = f"{name!r} is {tuple(found[name].shape)} there, {tuple(expected[name].shape)} here"
+    raise CheckpointError(
+        f"{run.best_checkpoint} does not fit the policy that {CONFIG_FILE} and {WINDOW_FILE} of {run.path} describe ({what}): "
+        "one of them was edited; nothing was evaluated; restore the run's files (an archive keeps a copy) or train it again"
+    )
 
 
 class Evaluator:
@@ -155,10 +176,39 @@ class Evaluator:
                 f"run {run.path} has no checkpoints/best.pt to evaluate (an archived run keeps its "
                 "records only): evaluate the original run directory, or train the run again"
             )
+        run.check_policy_identity(state["policy"])
         env = self.make_env("train", 1, 0)
         try:
             policy = make_policy(self.cfg, env).to(device)
         finally:
             env.close()
+        _check_weights_fit(run, policy.state_dict(), state["policy"])
         policy.load_state_dict(state["policy"])
         return policy
+
+    def check_records(self, run: RunDirectory) -> None:
+        """Refuses a run whose config describes another maze than the one its final
+        evaluations were recorded in (``eval/<regime>.json``'s ``maze``): an edited
+        ``config.yaml`` would evaluate another task under the run's name.
+
+        Raises:
+            CheckpointError: naming the record and the config.
+        """
+        for regime in REGIMES:
+            path = run.eval_path(regime)
+            if not path.is_file():
+                continue
+            recorded = run.read_json(path).get("maze", _UNRECORDED)
+            if recorded is _UNRECORDED:
+                continue
+            env = make_env(self.cfg, regime, 1, 0)
+            try:
+                geometry = json.loads(json.dumps(maze_geometry(env)))  # as the record stores it (lists, not tuples)
+            finally:
+                env.close()
+            if geometry != recorded:
+                raise CheckpointError(
+                    f"{run.config_file} describes another maze than the one {path.relative_to(run.path)} was recorded in "
+                    f"(env.name {self.cfg.env.name!r}): the config was edited; nothing was evaluated; restore it (an "
+                    "archive keeps a copy) or train a run of the new config"
+                )

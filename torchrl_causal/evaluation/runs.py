@@ -10,6 +10,7 @@ every run below a folder that has at least one final evaluation; records that
 from __future__ import annotations
 
 import csv
+import json
 import logging
 import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
@@ -27,6 +28,7 @@ from torchrl_causal.experiment.run_directory import (
     RunDirectory,
     atomic_save,
     atomic_write_text,
+    check_copy_targets,
     copy_folders,
     run_label,
 )
@@ -199,12 +201,15 @@ POLICY_CHECKPOINT_KEYS = frozenset({"progress", "train_return", "policy"})
 POLICY_CHECKPOINT_OPTIONAL_KEYS = frozenset({"train_success"})
 
 
-def copy_selected_policy(run: RunDirectory, target: RunDirectory) -> Path:
+def copy_selected_policy(run: RunDirectory, target: RunDirectory) -> list[Path]:
     """Copies ``run``'s selected policy (``checkpoints/best.pt``) to ``target``, checking that it
-    holds the actor's weights only, and returns the copy's path.
+    holds the actor's weights only, with its identity (``checkpoints/best.json``: the digests of
+    its weights, config and window; the run's own, else computed from the run as it is), and
+    returns the two copies' paths.
 
     Raises:
-        CheckpointError: the run has no selected policy, or its checkpoint holds more.
+        CheckpointError: the run has no selected policy, its checkpoint holds more, or its
+            files differ from the digests it recorded.
     """
     state = run.load_checkpoint(best=True)
     if state is None:
@@ -213,9 +218,22 @@ def copy_selected_policy(run: RunDirectory, target: RunDirectory) -> Path:
         raise CheckpointError(
             f"{run.best_checkpoint} holds {sorted(state)}, not the selected policy alone ({sorted(POLICY_CHECKPOINT_KEYS)})"
         )
+    run.check_policy_identity(state["policy"])
+    identity = run.read_json(run.policy_identity_file) if run.policy_identity_file.is_file() else run.policy_identity(state["policy"])
     target.best_checkpoint.parent.mkdir(parents=True, exist_ok=True)
     atomic_save(state, target.best_checkpoint)
-    return target.best_checkpoint
+    target.write_json(target.policy_identity_file, identity)
+    return [target.best_checkpoint, target.policy_identity_file]
+
+
+def _is_evaluation_record(path: Path) -> bool:
+    """Whether ``path`` is an evaluation record (a JSON object with a ``regime``), not a file
+    of another kind that someone put in ``eval/``."""
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(record, dict) and "regime" in record
 
 
 def archive_runs(root: str | Path, out: str | Path, *, policies: bool = False) -> list[Path]:
@@ -257,20 +275,25 @@ def archive_runs(root: str | Path, out: str | Path, *, policies: bool = False) -
          'rovermaze_medium/h1000-cs1.0-k10/c_sqil/seed0/status.json']
     """
     root, out = copy_folders(root, out)
+    runs = list(_complete_runs(root))
+    check_copy_targets([out / run.path.relative_to(root) for run in runs])  # before the first file is written
     archived = []
-    for run in _complete_runs(root):
-        target = out / run.path.relative_to(root)
+    for run in runs:
+        target = RunDirectory(out / run.path.relative_to(root))
         record = {path.relative_to(run.path) for path in run.record_files()}
         for relative in sorted(record):
-            destination = target / relative
+            destination = target.path / relative
             destination.parent.mkdir(parents=True, exist_ok=True)
             atomic_write_text(destination, (run.path / relative).read_text())
         if policies:
-            record.add(copy_selected_policy(run, RunDirectory(target)).relative_to(target))
-        if target.is_dir():  # what only an earlier run of this directory recorded (its other evaluations)
-            for stale in [p for p in target.rglob("*") if p.is_file() and p.relative_to(target) not in record]:
+            record |= {path.relative_to(target.path) for path in copy_selected_policy(run, target)}
+        # What only an earlier run of this directory recorded (its other evaluations): only the
+        # files an archive writes are candidates; anything else found there is left alone.
+        written = [*target.record_files(), target.best_checkpoint, target.policy_identity_file]
+        for stale in [path for path in written if path.is_file() and path.relative_to(target.path) not in record]:
+            if stale.parent.name != "eval" or _is_evaluation_record(stale):
                 stale.unlink()
-        archived.append(target)
+        archived.append(target.path)
     return archived
 
 

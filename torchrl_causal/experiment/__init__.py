@@ -18,6 +18,7 @@ from torchrl_causal.experiment.interrupts import RunInterrupted
 from torchrl_causal.experiment.run_directory import (
     CheckpointError,
     ConfigMismatchError,
+    ForeignFilesError,
     RunDirectory,
     RunInUseError,
     load_checkpoint,
@@ -30,6 +31,7 @@ __all__ = [
     "CheckpointError",
     "ConfigMismatchError",
     "ConfigValueError",
+    "ForeignFilesError",
     "RunDirectory",
     "RunInUseError",
     "RunInterrupted",

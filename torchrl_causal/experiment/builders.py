@@ -220,9 +220,7 @@ def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:
     try:
         demonstrations = load_source(cfg.demos.source, path, expected=reference)
     except DatasetError as error:
-        raise DatasetError(
-            f"{error}. Delete {path} and rerun to collect the set again (demos.seed {cfg.demos.seed}), or point demos.path at a good copy"
-        ) from None
+        raise DatasetError(f"{error}. {_demonstrations_remedy(cfg)}") from None
     if not cfg.demos.successful_only:
         return demonstrations
     kept = successful_episodes(demonstrations)
@@ -257,6 +255,27 @@ def _expected_demonstrations(cfg: DictConfig) -> dict[str, Any]:
         env.close()
 
 
+def _demonstrations_remedy(cfg: DictConfig) -> str:
+    """What to do about the unusable set at ``cfg.demos.path``. Deleting it is advised only
+    for a set this package wrote (its metadata names the expert that collected it), naming
+    that path and expert; a file or folder of anything else is never ours to delete."""
+    from torchrl_causal.data.demonstrations import DatasetError, read_metadata
+
+    path = Path(cfg.demos.path)
+    elsewhere = "point demos.path at a good copy, or at a path that does not exist yet (the set is collected there)"
+    if not path.is_dir():
+        return f"demos.path={path} is not a demonstration set's folder; nothing was changed: {elsewhere}"
+    try:
+        metadata = read_metadata(path)
+    except DatasetError:
+        return f"{path} is not a demonstration set written by torchrl-causal; nothing was changed: {elsewhere}"
+    expert = metadata.get("policy") or "an unrecorded expert"
+    return (
+        f"Nothing was changed. {path} is a set collected by {expert}: delete that folder and rerun to collect it again "
+        f"(demos.seed {cfg.demos.seed}), or {elsewhere}"
+    )
+
+
 def check_demonstrations(cfg: DictConfig) -> None:
     """Refuses the demonstrations of ``cfg.demos`` before a run starts (see
     :func:`~torchrl_causal.data.sources.check_source`): a wrong env, a missing key,
@@ -269,10 +288,7 @@ def check_demonstrations(cfg: DictConfig) -> None:
     except DatasetError as error:
         if minari_reference(cfg.demos.source) is not None:
             raise
-        raise DatasetError(
-            f"{error}. Delete {cfg.demos.path} and rerun to collect the set again (demos.seed "
-            f"{cfg.demos.seed}), or point demos.path at a good copy"
-        ) from None
+        raise DatasetError(f"{error}. {_demonstrations_remedy(cfg)}") from None
 
 
 def expert_transitions(window: AdjustmentWindow, demonstrations: TensorDictBase) -> TensorDict:

@@ -10,6 +10,8 @@ A run directory (``cfg.run_dir``) holds::
     train.log                the run's log lines (progress, evaluations, resume, errors)
     checkpoints/last.pt      networks, optimisers, schedulers, RNG states and counters (resume)
     checkpoints/best.pt      the policy with the best train-regime evaluation return
+    checkpoints/best.json    digests of best.pt's weights and of the config and window it was
+                             trained under (:meth:`RunDirectory.check_policy_identity`)
     .lock                    held (``flock``) by the process running the run; names its pid
     replay/                  the policy replay buffer, memory-mapped (off-policy runs)
     logs/scalars/...csv      TorchRL CSVLogger scalars (``eval/train_return`` = training curve)
@@ -19,6 +21,12 @@ A run directory (``cfg.run_dir``) holds::
 
 Every file is written atomically (temporary file in the same folder, then rename), and
 checkpoints are read with ``torch.load(..., weights_only=True)``.
+
+A run only ever writes over or removes what it can prove is its own: the entries above
+(:data:`RUN_ENTRIES`) of a folder whose ``config.yaml`` is a run's config. A folder that
+holds anything else (a user's files, or a ``config.yaml`` that is not a run's) is refused by
+:meth:`RunDirectory.check_owned`, naming what it found, before anything is written there:
+``resume=false`` then discards nothing, and ``resume=true`` adds no run files among them.
 
 A run directory belongs to one config. :meth:`RunDirectory.claim` compares the config
 that determines the result (everything but :data:`RUNTIME_KEYS` and an extendable
@@ -32,9 +40,11 @@ killed run leaves no stale lock behind.
 from __future__ import annotations
 
 import fcntl
+import hashlib
 import json
 import math
 import os
+import re
 import shutil
 import socket
 from collections.abc import Iterable, Iterator, Mapping, Sequence
@@ -58,20 +68,26 @@ __all__ = [
     "LOG_DIR",
     "TRAIN_CURVE",
     "RUNTIME_KEYS",
+    "RUN_ENTRIES",
     "CheckpointError",
     "ConfigMismatchError",
+    "ForeignFilesError",
     "RunFileError",
     "RunDirectory",
     "RunInUseError",
     "atomic_save",
     "atomic_write_text",
     "carry_runs",
+    "check_copy_targets",
     "copy_folders",
     "MOVED_KEYS",
     "MOVED_TARGETS",
     "changed_keys",
+    "is_run_config",
     "load_checkpoint",
     "migrate_config",
+    "config_digest",
+    "policy_digest",
     "run_label",
 ]
 
@@ -85,7 +101,17 @@ LOG_DIR = "logs"
 CHECKPOINT_DIR = "checkpoints"
 REPLAY_DIR = "replay"
 LOCK_FILE = ".lock"
+WANDB_DIR = "wandb"  # logger=wandb writes its offline runs here
+POLICY_DIGEST_FILE = "best.json"  # beside checkpoints/best.pt: what it was trained under (digests)
 TRAIN_CURVE = "eval/train_return"  # scalar logged at every periodic train-regime evaluation
+
+#: Every entry a run writes at the top of its directory: all that ``resume=false`` ever removes.
+RUN_ENTRIES: frozenset[str] = frozenset(
+    {CONFIG_FILE, WINDOW_FILE, STATUS_FILE, CODE_FILE, TRAIN_LOG, EVAL_DIR, LOG_DIR, CHECKPOINT_DIR, REPLAY_DIR, LOCK_FILE, WANDB_DIR}
+)
+#: The keys every run's ``config.yaml`` has: what tells it from another program's config.yaml.
+_RUN_CONFIG_KEYS = ("algo", "env", "seed", "run_dir")
+_TEMPORARY = re.compile(r"^\..+\.tmp\d+$")  # what an atomic write killed midway leaves behind
 
 #: Config keys that change how a run executes or where it writes, never its numbers: they
 #: may differ between the attempts of one run (a resume on another machine, more threads).
@@ -190,6 +216,70 @@ class ConfigMismatchError(TorchRLCausalError, ValueError):
 
 class RunInUseError(TorchRLCausalError, RuntimeError):
     """Another process is running this run directory."""
+
+
+class ForeignFilesError(TorchRLCausalError, ValueError):
+    """A folder holds files that no run of this package wrote: they are never written over or removed."""
+
+
+def is_run_config(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a run's ``config.yaml``: a YAML mapping with the keys every run's
+    config has (``algo``, ``env``, ``seed``, ``run_dir``). A ``config.yaml`` of another program
+    (or a corrupted one) is not, and nothing beside it is a run's to remove.
+
+    Examples:
+        >>> import tempfile, pathlib
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "config.yaml"
+        >>> _ = path.write_text("algo: {name: bc}\\nenv: {name: u}\\nseed: 0\\nrun_dir: runs/x")
+        >>> is_run_config(path)
+        True
+        >>> _ = path.write_text("model: resnet50")
+        >>> is_run_config(path)
+        False
+    """
+    try:
+        config = OmegaConf.load(path)
+    except Exception:  # noqa: BLE001 -- unreadable or not YAML: not provably a run's
+        return False
+    return isinstance(config, DictConfig) and all(key in config for key in _RUN_CONFIG_KEYS)
+
+
+def _digest(record: Any) -> str:
+    return hashlib.sha256(json.dumps(record, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def config_digest(config: Mapping[str, Any], ignored: Iterable[str] = ()) -> str:
+    """SHA-256 of the part of ``config`` that determines a run's result (:data:`RUNTIME_KEYS`
+    and ``ignored`` aside; a key set to an off value counts as absent, as in :func:`changed_keys`).
+
+    Examples:
+        >>> config_digest({"seed": 0, "resume": True}) == config_digest({"seed": 0, "drop": [], "resume": False})
+        True
+        >>> config_digest({"seed": 0}) == config_digest({"seed": 1})
+        False
+    """
+
+    def off(value: Any) -> bool:
+        return value is None or value is False or (isinstance(value, (list, dict)) and not value)
+
+    return _digest({key: value for key, value in _identity(config, (*RUNTIME_KEYS, *ignored)).items() if not off(value)})
+
+
+def policy_digest(policy_state: Mapping[str, Any]) -> str:
+    """SHA-256 over a policy's state dict (names, dtypes, shapes and bytes), independent of the
+    file that holds it: a copy of ``best.pt`` (an archive re-saves it) keeps its digest.
+
+    Examples:
+        >>> a = {"w": torch.zeros(2, 3)}
+        >>> policy_digest(a) == policy_digest({"w": torch.zeros(2, 3)}), policy_digest(a) == policy_digest({"w": torch.ones(2, 3)})
+        (True, False)
+    """
+    digest = hashlib.sha256()
+    for name, value in sorted(policy_state.items()):
+        tensor = value.detach().cpu().contiguous().reshape(-1)
+        digest.update(f"{name}:{tensor.dtype}:{tuple(value.shape)}".encode())
+        digest.update(tensor.view(torch.uint8).numpy().tobytes())
+    return digest.hexdigest()
 
 
 def run_label(algorithm: str, causal: bool, window_matched: bool = False, drop: Sequence[str] = ()) -> str:
@@ -360,6 +450,10 @@ class RunDirectory:
         return self.path / LOCK_FILE
 
     @property
+    def policy_identity_file(self) -> Path:
+        return self.path / CHECKPOINT_DIR / POLICY_DIGEST_FILE
+
+    @property
     def train_curve_file(self) -> Path:
         return self.log_dir / "scalars" / f"{TRAIN_CURVE}.csv"
 
@@ -435,12 +529,62 @@ class RunDirectory:
                 )
         atomic_write_text(self.config_file, OmegaConf.to_yaml(resolved))
 
-    def discard(self) -> None:
-        """Removes everything a previous attempt wrote (``resume=false``), the lock file aside."""
+    def _ours(self, entry: Path) -> bool:
+        return entry.name in RUN_ENTRIES or bool(_TEMPORARY.match(entry.name))
+
+    def foreign_entries(self) -> list[Path]:
+        """What this folder holds that no run wrote (empty for a run directory, a missing or
+        an empty folder, or one a killed run left with its lock alone).
+
+        Everything in it is foreign when its ``config.yaml`` is missing or not a run's
+        (:func:`is_run_config`) while it holds more than a lock: nothing proves it a run's.
+
+        Examples:
+            >>> import tempfile
+            >>> run = RunDirectory(tempfile.mkdtemp())
+            >>> _ = (run.path / "thesis.tex").write_text("...")
+            >>> [p.name for p in run.foreign_entries()]
+            ['thesis.tex']
+        """
+        if not self.path.is_dir():
+            return []
+        entries = sorted(self.path.iterdir())
+        foreign = [entry for entry in entries if not self._ours(entry)]
+        if foreign:
+            return foreign
+        if any(entry.name != LOCK_FILE and not _TEMPORARY.match(entry.name) for entry in entries) and not is_run_config(self.config_file):
+            return [entry for entry in entries if entry.name != LOCK_FILE and not _TEMPORARY.match(entry.name)]
+        return []
+
+    def check_owned(self, remedy: str = "choose another run_root or run_name (a missing or empty folder)") -> None:
+        """Refuses a folder that holds anything no run wrote (:meth:`foreign_entries`), naming
+        it and ``remedy`` (what to do instead).
+
+        Raises:
+            ForeignFilesError: before anything is written or removed.
+        """
+        if self.path.exists() and not self.path.is_dir():
+            raise ForeignFilesError(f"{self.path} is a file, not a run directory: nothing was changed; {remedy}")
+        foreign = self.foreign_entries()
+        if foreign:
+            shown = ", ".join(entry.name for entry in foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+            raise ForeignFilesError(
+                f"{self.path} is not a run directory (it holds {shown}, which no run wrote): nothing was changed; {remedy}"
+            )
+
+    def discard(self, keep_lock: bool = True) -> None:
+        """Removes everything a previous attempt wrote (``resume=false``), the lock file aside
+        unless ``keep_lock`` is false; only the run's own entries (:data:`RUN_ENTRIES`), and only
+        in a folder :meth:`check_owned` accepts.
+
+        Raises:
+            ForeignFilesError: the folder holds anything else (nothing is removed).
+        """
         if not self.path.is_dir():
             return
+        self.check_owned()
         for entry in self.path.iterdir():
-            if entry.name == LOCK_FILE:
+            if (entry.name == LOCK_FILE and keep_lock) or not self._ours(entry):
                 continue
             if entry.is_dir() and not entry.is_symlink():
                 shutil.rmtree(entry)
@@ -588,8 +732,47 @@ class RunDirectory:
 
     # ------------------------------------------------------------------ checkpoints
 
-    def save_checkpoint(self, state: Mapping[str, Any], best: bool = False) -> None:
+    def save_checkpoint(self, state: Mapping[str, Any], best: bool = False, ignored: Iterable[str] = ()) -> None:
+        """Writes the last checkpoint, or with ``best`` the selected policy and its identity
+        (:meth:`policy_identity`, ``ignored`` naming the config keys a longer budget may change)."""
         atomic_save(dict(state), self.best_checkpoint if best else self.last_checkpoint)
+        if best:
+            self.write_json(self.policy_identity_file, self.policy_identity(state["policy"], ignored))
+
+    def policy_identity(self, policy_state: Mapping[str, Any], ignored: Iterable[str] = ()) -> dict[str, Any]:
+        """Digests of a policy's weights and of the config and window of this directory
+        (:func:`policy_digest`, :func:`config_digest`): what ``checkpoints/best.json`` records."""
+        ignored = sorted(ignored)
+        return {
+            "policy": policy_digest(policy_state),
+            "config": config_digest(cast(dict[str, Any], OmegaConf.to_container(self.read_config())), ignored),
+            "window": _digest(self.read_json(self.window_file)) if self.window_file.is_file() else None,
+            "config_ignored": ignored,
+        }
+
+    def check_policy_identity(self, policy_state: Mapping[str, Any]) -> None:
+        """Refuses a selected policy whose weights, config or window differ from those
+        ``checkpoints/best.json`` recorded when it was selected (a run without that file,
+        trained before it existed, passes).
+
+        Raises:
+            CheckpointError: naming what changed.
+        """
+        if not self.policy_identity_file.is_file():
+            return
+        recorded = self.read_json(self.policy_identity_file)
+        current = self.policy_identity(policy_state, recorded.get("config_ignored", ()))
+        changed = [
+            {"policy": str(self.best_checkpoint.relative_to(self.path)), "config": CONFIG_FILE, "window": WINDOW_FILE}[key]
+            for key in ("policy", "config", "window")
+            if recorded.get(key) != current[key]
+        ]
+        if changed:
+            raise CheckpointError(
+                f"{self.path}: {' and '.join(changed)} changed since its policy was selected (the digests in "
+                f"{self.policy_identity_file.relative_to(self.path)} differ): nothing was evaluated; restore the run's "
+                "files (an archive keeps a copy) or train the run again"
+            )
 
     def load_checkpoint(self, best: bool = False, map_location: str | torch.device = "cpu") -> dict[str, Any] | None:
         """The last (or best) checkpoint loaded onto ``map_location``, ``None`` when there is none."""
@@ -606,6 +789,18 @@ def copy_folders(root: str | Path, out: str | Path) -> tuple[Path, Path]:
     if out.is_relative_to(root) or root.is_relative_to(out):
         raise InvalidValueError(f"copy folder {out} and runs folder {root} must not contain one another")
     return root, out
+
+
+def check_copy_targets(targets: Iterable[Path]) -> None:
+    """Refuses a copy (an archive, a carry) whose target run directories hold anything no
+    run wrote (:meth:`RunDirectory.check_owned`), before the first file is copied: a copy
+    writes over, and removes, only a run's own files.
+
+    Raises:
+        ForeignFilesError: naming the target and what it holds.
+    """
+    for target in targets:
+        RunDirectory(target).check_owned("nothing was copied: choose another out (a missing folder, or one holding runs only)")
 
 
 def carry_runs(root: str | Path, out: str | Path) -> list[Path]:
@@ -625,11 +820,11 @@ def carry_runs(root: str | Path, out: str | Path) -> list[Path]:
         ValueError: one of ``root`` and ``out`` lies inside the other.
     """
     root, out = copy_folders(root, out)
+    runs = [RunDirectory(config_file.parent) for config_file in sorted(root.rglob(CONFIG_FILE))]
+    runs = [run for run in runs if run.last_checkpoint.is_file()]
+    check_copy_targets([out / run.path.relative_to(root) for run in runs])
     carried = []
-    for config_file in sorted(root.rglob(CONFIG_FILE)):
-        run = RunDirectory(config_file.parent)
-        if not run.last_checkpoint.is_file():
-            continue
+    for run in runs:
         left_behind = (run.replay_dir, run.lock_file)
         target = out / run.path.relative_to(root)
         shutil.copytree(

@@ -263,6 +263,7 @@ class Trainer(ABC):
                     "policy": self.policy.state_dict(),
                 },
                 best=True,
+                ignored=(self.budget_key,),  # a longer budget keeps the policy it already selected
             )
         self.save_checkpoint()
         log.info(
