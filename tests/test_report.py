@@ -315,9 +315,17 @@ def test_status_lists_every_run_with_its_state(tmp_path: Path, capsys) -> None:
     RunDirectory(failed).record_attempt(attempt, progress=0)
     RunDirectory(failed).record_attempt({**attempt, "python": "3.12"}, progress=1)  # not a field that changes numbers
     RunDirectory(failed).record_attempt({**attempt, "demonstrations": "d2", "source": "b"}, progress=2)
+    RunDirectory(failed).record_attempt_cost(0, {"wall_s": 7560.0, "cpu_s": 42.4})
+    RunDirectory(failed).record_attempt_cost(2, {"wall_s": 750.0, "cpu_s": 700.0})
     rows = {row["run"].split("/")[-2]: row for row in run_statuses(tmp_path)}
     assert sorted(rows) == ["c_bc", "c_sqil", "sqil"]
     assert [rows[label]["attempts"] for label in ("c_sqil", "c_bc", "sqil")] == ["—", "2", "3 (source, demonstrations changed)"]
+    # attempts recorded before they had a cost (and one killed outright) read "—"
+    assert [rows[label]["cost (wall / CPU)"] for label in ("c_sqil", "c_bc", "sqil")] == [
+        "—",
+        "—",
+        "2.10 h / 42 s + — + 12.5 min / 11.7 min",
+    ]
     assert (rows["c_sqil"]["status"], rows["c_sqil"]["progress"], rows["c_sqil"]["deploy success %"]) == (
         "complete",
         "4 / 4 epochs (100%)",

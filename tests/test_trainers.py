@@ -9,6 +9,7 @@ import random
 import signal
 import subprocess
 import sys
+import time
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -20,6 +21,7 @@ from tensordict import MemoryMappedTensor, TensorDict
 from tiny_runs import ALGO, QUICK, ROVER
 
 from torchrl_causal.cli.archive import main as archive_main
+from torchrl_causal.cli.status import run_statuses
 from torchrl_causal.data import read_metadata
 from torchrl_causal.evaluation import load_runs, write_report
 from torchrl_causal.evaluation.evaluator import Evaluator
@@ -36,6 +38,7 @@ from torchrl_causal.experiment import (
     load_checkpoint,
 )
 from torchrl_causal.experiment.builders import make_window
+from torchrl_causal.experiment.provenance import COST_FIELDS, process_cpu_seconds
 from torchrl_causal.experiment.run_directory import carry_runs
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.lifecycle import run
@@ -367,7 +370,10 @@ def test_interrupt_at_a_random_step_then_resume_equals_an_uninterrupted_run(tmp_
     attempts = [RunDirectory(cfg.run_dir).read_attempts() for cfg in (straight, interrupted)]
     assert [a["progress"] for a in attempts[0]] == [0]
     assert [a["progress"] for a in attempts[1]] == [0, interrupted_at]
-    assert attempts[1][0] == {**attempts[1][1], "progress": 0} == attempts[0][0]
+    identities = [
+        {k: v for k, v in attempt.items() if k not in COST_FIELDS} for attempt in (attempts[1][0], attempts[1][1], attempts[0][0])
+    ]
+    assert identities[0] == {**identities[1], "progress": 0} == identities[2]
 
 
 @pytest.mark.parametrize("algo", sorted(EXACT))
@@ -404,6 +410,31 @@ def test_a_resume_under_other_code_is_logged_and_recorded(tmp_path: Path, monkey
     warned = [r.getMessage() for r in caplog.records if "other code" in r.getMessage()]
     assert len(warned) == 1 and f"source: '{attempts[0]['source']}' -> '0123456789ab'" in warned[0]
     assert RunDirectory(cfg.run_dir).code_file in RunDirectory(cfg.run_dir).record_files()
+
+
+def test_each_attempt_records_its_wall_and_cpu_time_and_status_shows_them(tmp_path: Path) -> None:
+    cfg = tiny_config(tmp_path, "rovermaze_u", "bc", True, "algo.epochs=4", "algo.patience=10")
+
+    def attempt(interrupted: bool) -> tuple[float, float]:
+        """This process's own clocks around one attempt: the attempt's cost lies within them."""
+        wall, cpu = time.monotonic(), process_cpu_seconds()
+        if interrupted:
+            with _interrupt_at(get_class(cfg.algo.trainer), 2), pytest.raises(RunInterrupted):
+                run(cfg)
+        else:
+            run(cfg)
+        return time.monotonic() - wall, process_cpu_seconds() - cpu
+
+    spent = [attempt(interrupted=True), attempt(interrupted=False)]
+    attempts = RunDirectory(cfg.run_dir).read_attempts()
+    assert [a["progress"] for a in attempts] == [0, 2]
+    for attempt, (wall, cpu) in zip(attempts, spent):
+        assert 0.9 * wall - 0.05 <= attempt["wall_s"] <= wall + 1e-3
+        assert 0.9 * cpu - 0.05 <= attempt["cpu_s"] <= cpu + 1e-3
+    (row,) = run_statuses(tmp_path)
+    assert row["cost (wall / CPU)"].count(" / ") == 2 and "—" not in row["cost (wall / CPU)"]
+    run(cfg)  # complete: the stored evaluations are returned, no attempt is made
+    assert RunDirectory(cfg.run_dir).read_attempts() == attempts
 
 
 def test_replay_buffer_lives_in_the_run_directory_not_in_the_checkpoint(tmp_path: Path) -> None:

@@ -35,7 +35,7 @@ from torchrl_causal.experiment.config import register_resolvers
 from torchrl_causal.experiment.device import resolve_device
 from torchrl_causal.experiment.interrupts import RunInterrupted, signals_raise
 from torchrl_causal.experiment.memory import check_run_fits
-from torchrl_causal.experiment.provenance import attempt_identity
+from torchrl_causal.experiment.provenance import AttemptClock, attempt_identity
 from torchrl_causal.experiment.run_directory import CheckpointError, RunDirectory
 from torchrl_causal.experiment.schema import ConfigValueError, validate_config
 from torchrl_causal.graphs.window import AdjustmentWindow
@@ -106,6 +106,7 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
         RunInUseError: another process is running ``cfg.run_dir`` (nothing is written).
         RunInterrupted: on SIGINT/SIGTERM/SIGUSR2, after checkpointing and marking the run interrupted.
     """
+    clock = AttemptClock()  # the attempt's cost counts from here: window and demonstration checks included
     validate_config(cfg)
     _check_run_root(Path(cfg.run_dir))
     RunDirectory(cfg.run_dir).check_owned()  # a folder of the user's own files is neither cleared nor written into
@@ -126,7 +127,7 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
         if not cfg.resume:
             run_dir.discard()
             created = created or run_dir.path
-        return _claim_and_run(cfg, run_dir, trainer_class, window, total, created)
+        return _claim_and_run(cfg, run_dir, trainer_class, window, total, created, clock)
 
 
 def _remove_new_run(run_dir: RunDirectory, created: Path) -> None:
@@ -161,6 +162,7 @@ def _claim_and_run(
     window: AdjustmentWindow | None,
     total: int,
     created: Path | None,
+    clock: AttemptClock,
 ) -> dict[str, EvaluationResult]:
     extendable = trainer_class is not None and trainer_class.extendable_budget(cfg)
     run_dir.claim(cfg, ignored=(trainer_class.budget_key,) if trainer_class is not None and extendable else ())
@@ -168,6 +170,7 @@ def _claim_and_run(
     if status.get("status") == "complete" and status.get("total") == total:
         log.info("%s is complete: its stored evaluations are returned", run_dir.path)
         return _stored_results(run_dir)
+    attempt = len(run_dir.read_attempts())  # the index of the attempt this call records
     with _run_log(run_dir), signals_raise():
         try:
             return _train_and_evaluate(cfg, run_dir, trainer_class, window, total)
@@ -186,6 +189,8 @@ def _claim_and_run(
             else:
                 run_dir.update_status("failed", error=f"{type(error).__name__}: {error}")
             raise
+        finally:  # completed, interrupted or failed (a removed run directory has no attempt left to record it in)
+            run_dir.record_attempt_cost(attempt, clock.cost())
 
 
 def _train_and_evaluate(

@@ -5,8 +5,20 @@ variables of its :class:`~torchrl_causal.graphs.TimeSliceTemplate`: observed var
 root keys, variables latent to the imitator live under ``("latent", name)``, the confounder
 under ``("scm", name)``. :class:`ConfoundedEnv` owns what every such env shares (argument
 validation, seeding, step counting, truncation at ``horizon``, the ``"success"`` flag, partial
-resets); subclasses implement three hooks (:meth:`~ConfoundedEnv._reset_state`,
+resets, partial steps); subclasses implement three hooks (:meth:`~ConfoundedEnv._reset_state`,
 :meth:`~ConfoundedEnv._transition`, :meth:`~ConfoundedEnv._observation`).
+
+**Partial steps.** A step whose input carries TorchRL's partial-step mask
+(:data:`STEP_MASK_KEY`, ``"_step"``: bool, batch-shaped, what ``EnvBase.rollout(...,
+break_when_all_done=True)`` writes and what TorchRL hands through a
+:class:`~torchrl.envs.TransformedEnv` to its base env) steps only the rows it sets. A skipped
+row is not simulated (a MuJoCo maze does not step its physics nor read its state), its
+runtime state (step count, success, gust, the subclass's :attr:`~ConfoundedEnv.runtime_attributes`)
+stays as it was, its ``"next"`` entries repeat its input entries (TorchRL's convention for a
+skipped step; entries the input lacks are read from the held state) and its reward is 0. The
+random numbers a step draws are drawn for the whole batch as in a full step, so the stepped
+rows' outcomes are bit-identical to a full step's: :func:`~torchrl_causal.evaluation.evaluate_policy`
+uses it to stop simulating episodes that ended.
 
 :class:`GustConfoundedEnv` adds the confounding mechanism of the maze suite: a
 piecewise-constant :class:`GustProcess` that pushes the body and enters the reward, and a
@@ -17,10 +29,12 @@ batched torch functions, so envs that simulate in numpy/MuJoCo can call them on 
 
 from __future__ import annotations
 
+import inspect
 import math
 from abc import abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cache
 from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import torch
@@ -29,22 +43,34 @@ from tensordict.utils import NestedKey
 from torchrl.data import Binary, Composite, TensorSpec, Unbounded
 from torchrl.envs import EnvBase
 
-from torchrl_causal.errors import InvalidValueError
+from torchrl_causal.errors import InvalidValueError, TorchRLCausalError
 
 if TYPE_CHECKING:
     from torchrl_causal.graphs import TimeSliceTemplate
 
 __all__ = [
     "REGIMES",
+    "STEP_MASK_KEY",
     "CompassSensor",
     "ConfoundedEnv",
     "GustConfoundedEnv",
     "GustProcess",
+    "PartialStepError",
     "rotate",
 ]
 
 Regime = Literal["train", "deploy"]
 REGIMES: tuple[str, ...] = ("train", "deploy")
+
+#: TorchRL's partial-step entry of a step's input: a batch-shaped bool mask of the envs to
+#: step (the others are skipped). ``EnvBase.step`` passes it on to a batch-locked env's
+#: ``_step`` when it is neither all True nor all False (it drops an all-True mask and skips
+#: the env's ``_step`` altogether for an all-False one).
+STEP_MASK_KEY = "_step"
+
+
+class PartialStepError(TorchRLCausalError, ValueError):
+    """A step's partial-step mask (:data:`STEP_MASK_KEY`) that is no bool mask of the env's batch."""
 
 
 def rotate(vectors: torch.Tensor, angle: float | torch.Tensor) -> torch.Tensor:
@@ -180,6 +206,14 @@ def _copy_state(value: Any, device: torch.device | None = None) -> Any:
     if isinstance(value, Mapping):
         return {key: _copy_state(item, device) for key, item in value.items()}
     return value.to(device).clone() if device is not None else value.clone()
+
+
+def _hold_rows(live: torch.Tensor, new: Any, old: Any) -> Any:
+    """``new`` where ``live`` (bool, batch-shaped) is set, else ``old``; tensors of shape
+    ``batch + event`` or dicts of them (a runtime attribute, see :func:`_copy_state`)."""
+    if isinstance(new, Mapping):
+        return {key: _hold_rows(live, item, old[key]) for key, item in new.items()}
+    return torch.where(live.reshape(*live.shape, *(1,) * (new.dim() - live.dim())), new, old)
 
 
 def _validate_regime(regime: str) -> str:
@@ -340,8 +374,19 @@ class ConfoundedEnv(EnvBase):
         """Draws a fresh initial state wherever ``mask`` (bool, ``batch + (1,)``) is set."""
 
     @abstractmethod
-    def _transition(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Advances one step under ``action``; returns ``(reward, success)``, each ``batch + (1,)``."""
+    def _transition(self, action: torch.Tensor, live: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Advances one step under ``action``; returns ``(reward, success)``, each ``batch + (1,)``.
+
+        ``live`` (bool, ``batch + (1,)``), given for a partial step only, names the rows it
+        steps. The rows it does not name may be computed or not (their values are
+        discarded: :meth:`_step` puts back their :attr:`runtime_attributes`), but an
+        implementation must (1) draw its random numbers for the whole batch, as a full step
+        does, so the stepped rows get the same ones, and (2) leave any state it keeps
+        outside :attr:`runtime_attributes` unchanged in the skipped rows (a MuJoCo maze
+        does not step their simulations). A subclass whose ``_transition`` takes no
+        ``live`` computes every row of a partial step, which is right when all its state
+        is in :attr:`runtime_attributes`.
+        """
 
     @abstractmethod
     def _observation(self) -> dict[str, object]:
@@ -390,18 +435,48 @@ class ConfoundedEnv(EnvBase):
             device=self.device,
         )
 
+    def _live_rows(self, tensordict: TensorDictBase) -> torch.Tensor | None:
+        """The partial-step mask of a step's input (:data:`STEP_MASK_KEY`) reshaped to
+        ``batch + (1,)``, or ``None`` when it is absent or sets every row."""
+        mask = tensordict.get(STEP_MASK_KEY, None)
+        if mask is None:
+            return None
+        if mask.dtype != torch.bool or mask.numel() != self.batch_size.numel():
+            raise PartialStepError(
+                f"the step's {STEP_MASK_KEY!r} entry must be a bool mask of the env's batch {tuple(self.batch_size)}, "
+                f"got dtype {mask.dtype} and shape {tuple(mask.shape)}"
+            )
+        mask = mask.reshape(self._success.shape).to(self.device)
+        return None if bool(mask.all()) else mask
+
+    @classmethod
+    @cache
+    def _skips_rows(cls) -> bool:
+        """Whether this class's :meth:`_transition` takes the partial step's ``live`` rows."""
+        return "live" in inspect.signature(cls._transition).parameters
+
+    def _runtime_state(self) -> dict[str, Any]:
+        return {name: _copy_state(getattr(self, name)) for name in self.runtime_attributes if hasattr(self, name)}
+
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
-        reward, success = self._transition(tensordict.get("action"))
+        live = self._live_rows(tensordict)
+        held = None if live is None else self._runtime_state()
+        action = tensordict.get("action")
+        reward, success = self._transition(action) if live is None or not self._skips_rows() else self._transition(action, live)
         self._step_count = self._step_count + 1
         self._success = success
         self._advance_exogenous()
-        terminated = self._terminated(success)
+        if held is not None:  # after every draw of the step, before anything is read from the state
+            rows = live.reshape(self.batch_size)
+            for name, old in held.items():
+                setattr(self, name, _hold_rows(rows, getattr(self, name), old))
+        terminated = self._terminated(self._success)
         truncated = (self._step_count >= self.horizon) & ~terminated
-        return TensorDict(
+        next_tensordict = TensorDict(
             {
                 **self._observation(),
                 "reward": reward,
-                "success": success,
+                "success": self._success,
                 "done": terminated | truncated,
                 "terminated": terminated,
                 "truncated": truncated,
@@ -409,6 +484,18 @@ class ConfoundedEnv(EnvBase):
             batch_size=self.batch_size,
             device=self.device,
         )
+        if live is not None:
+            self._repeat_skipped_rows(next_tensordict, tensordict, live.reshape(self.batch_size))
+        return next_tensordict
+
+    def _repeat_skipped_rows(self, next_tensordict: TensorDictBase, tensordict: TensorDictBase, live: torch.Tensor) -> None:
+        """Writes, in place, the ``"next"`` entries of the rows a partial step skipped: their
+        input entries (TorchRL's ``EnvBase._skip_tensordict`` convention), the held state's
+        where the input lacks one, a zero reward."""
+        for key, value in next_tensordict.items(include_nested=True, leaves_only=True):
+            previous = torch.zeros_like(value) if key == "reward" else tensordict.get(key, None)
+            if previous is not None:
+                next_tensordict.set(key, _hold_rows(live, value, previous.to(value.dtype)))
 
 
 class GustConfoundedEnv(ConfoundedEnv):

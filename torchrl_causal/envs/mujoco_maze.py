@@ -191,16 +191,20 @@ class BatchedSimulation:
             data.qvel[:] = qvel[k]
             mujoco.mj_forward(self.model, data)
 
-    def step(self, ctrl: np.ndarray, torso_force: np.ndarray) -> None:
-        """One control step of every simulation: ``ctrl`` is ``(n, nu)``, ``torso_force`` ``(n, 2)``.
+    def step(self, ctrl: np.ndarray, torso_force: np.ndarray, indices: Sequence[int] | None = None) -> None:
+        """One control step of the simulations ``indices`` (default: every one): ``ctrl`` is
+        ``(n, nu)``, ``torso_force`` ``(n, 2)``, rows of the others ignored.
 
         The planar force (world frame, newtons) is applied at the pushed body's centre of
         mass during every physics substep; a zero force (calm) clears the previous one.
+        The simulations share nothing but the read-only model, so a simulation steps to the
+        same state whichever others step with it.
         """
         model, torso, frame_skip = self.model, self.torso_id, self.frame_skip
-        for data, control, force in zip(self.datas, ctrl, torso_force):
-            data.ctrl[:] = control
-            data.xfrc_applied[torso, :2] = force
+        for index in range(self.num_envs) if indices is None else indices:
+            data = self.datas[index]
+            data.ctrl[:] = ctrl[index]
+            data.xfrc_applied[torso, :2] = torso_force[index]
             mujoco.mj_step(model, data, nstep=frame_skip)
 
     def qpos(self) -> np.ndarray:
@@ -464,13 +468,16 @@ class MujocoMazeEnv(GustConfoundedEnv):
         for index in indices:
             self._read_state(self.simulator.datas[index], self._state[index])
 
-    def _transition(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def _transition(self, action: torch.Tensor, live: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         ctrl = action.detach().reshape(self.simulator.num_envs, -1).cpu().numpy()
         force = self.gust.reshape(self.simulator.num_envs, 2).cpu().numpy()
-        self.simulator.step(ctrl, force)
-        state = self._state
-        for data, row in zip(self.simulator.datas, state):
-            self._read_state(data, row)
+        # A partial step neither simulates nor reads the skipped rows (the physics is the
+        # whole cost of a step); their state-buffer rows keep the last reading.
+        indices = range(self.simulator.num_envs) if live is None else np.flatnonzero(live.reshape(-1).cpu().numpy())
+        self.simulator.step(ctrl, force, indices)
+        state, datas = self._state, self.simulator.datas
+        for index in indices:
+            self._read_state(datas[index], state[index])
         x, y = self.variable_columns["P"].start, self.variable_columns["P"].start + 1
         distance = np.hypot(state[:, x] - self._goal_xy[0], state[:, y] - self._goal_xy[1])
         distance = torch.from_numpy(distance.astype(np.float32)).to(self.device).reshape(*self.batch_size, 1)

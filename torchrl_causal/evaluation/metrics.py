@@ -19,6 +19,7 @@ from tensordict import TensorDictBase
 from torchrl.envs import EnvBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
+from torchrl_causal.envs.base import STEP_MASK_KEY
 from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.progress import progress as progress_reporter
 
@@ -186,12 +187,25 @@ def evaluate_policy(
     position_key: str | None = None,
     trajectories: int = 0,
     progress: bool = False,
+    skip_finished: bool = True,
 ) -> EvaluationResult:
     """Runs ``episodes`` complete episodes of ``policy`` in the batched ``env``.
 
     The env is reset in rounds of ``env.batch_size`` parallel episodes; each round keeps
     the first episode of every sub-env (stepping stops once all of them are done), so every
     episode is counted whatever its length. Actions are the policy's deterministic mode.
+
+    An env whose episode ended is not simulated for the rest of its round: every step
+    carries TorchRL's partial-step mask (``"_step"``, :data:`~torchrl_causal.envs.base.STEP_MASK_KEY`)
+    of the episodes still running, which a :class:`~torchrl_causal.envs.ConfoundedEnv`
+    honours with the outcomes of a full step in the rows it steps (it draws its random
+    numbers for the whole batch). On the MuJoCo mazes, where failed episodes run to the
+    horizon, this skips about half the physics; the per-episode results are bit-identical
+    to stepping every env (``skip_finished=False``, the former loop, kept as the
+    reference). The policy still acts on the whole batch: on a CPU, a linear layer's output
+    rows on a subset of the batch differ from the same rows on the whole batch in the last
+    bits (the matmul kernel depends on the row count; measured on the shipped AntMaze
+    actor), and the policy is a small part of a step next to the physics.
 
     Args:
         env: a batched env with a 1-D batch (possibly a ``TransformedEnv``), seeded by the
@@ -204,6 +218,8 @@ def evaluate_policy(
         position_key: observation key of the 2-D position, recorded for the first
             ``trajectories`` episodes (``None`` records nothing).
         progress: report progress over episodes (a bar on a terminal, else log lines).
+        skip_finished: stop stepping the envs whose episode ended (``False``: step every
+            env until the round's last episode ends).
 
     Examples:
         >>> from torchrl_causal.envs import RouteChoiceEnv
@@ -234,7 +250,10 @@ def evaluate_policy(
             keep = min(trajectories - len(paths), width) if position_key is not None else 0
             track = [[td[position_key][i, :2].tolist()] for i in range(keep)]
             for _ in range(max_steps):
-                td = env.step(policy(td))
+                td = policy(td)
+                if skip_finished:
+                    td.set(STEP_MASK_KEY, alive.clone())
+                td = env.step(td)
                 nxt = td["next"]
                 episode_return += torch.where(alive, nxt["reward"].reshape(width).double(), 0.0)
                 length += alive.long()

@@ -10,6 +10,11 @@ RoverMaze-Medium's C-SQIL config (``results/rovermaze_medium.md``, "Repeatabilit
 each attempt of a run (its start, and every resume) records them in ``code.json``; a
 resume under other ones says so in the run's log, and the run's record (what
 ``python -m torchrl_causal.archive`` keeps) carries the whole list.
+
+An attempt also records what it cost when it ends (completed, interrupted or failed):
+:class:`AttemptClock` measures its wall time and its process CPU time (``wall_s``,
+``cpu_s``), so that a results table can say what a row cost. An attempt killed outright
+(SIGKILL, out of memory) records none.
 """
 
 from __future__ import annotations
@@ -18,7 +23,9 @@ import hashlib
 import os
 import platform
 import sys
+import time
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from functools import cache
 from importlib import metadata
 from pathlib import Path
@@ -27,14 +34,17 @@ from typing import Any
 import torch
 
 __all__ = [
+    "COST_FIELDS",
     "PACKAGE_DIR",
     "PACKAGES",
     "RUNTIME_FIELDS",
+    "AttemptClock",
     "attempt_identity",
     "cpu_model",
     "identity_changes",
     "machine_identity",
     "package_versions",
+    "process_cpu_seconds",
     "source_fingerprint",
 ]
 
@@ -44,6 +54,9 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1]
 #: thread count changes floating-point summation order; another numpy, mujoco or TorchRL
 #: changes the envs' and collectors' arithmetic).
 RUNTIME_FIELDS: tuple[str, ...] = ("source", "torch", "packages", "cpu", "threads", "demonstrations", "compile", "device")
+
+#: What an attempt records of its cost when it ends (:meth:`AttemptClock.cost`).
+COST_FIELDS: tuple[str, ...] = ("wall_s", "cpu_s")
 
 #: The distributions whose versions a run records (their import names differ for two).
 PACKAGES: tuple[str, ...] = ("torch", "torchrl", "tensordict", "numpy", "mujoco", "gymnasium", "hydra-core")
@@ -150,3 +163,48 @@ def identity_changes(previous: Mapping[str, Any], current: Mapping[str, Any]) ->
     return {
         key: (previous.get(key), current.get(key)) for key in RUNTIME_FIELDS if key in previous and previous.get(key) != current.get(key)
     }
+
+
+def process_cpu_seconds() -> float:
+    """User plus system CPU seconds of this process (all its threads) and of its child
+    processes that have ended and been waited for (a collector's worker processes, once
+    the collector shut them down). Where :mod:`resource` is missing (Windows), this
+    process's :func:`time.process_time` alone.
+
+    Examples:
+        >>> before = process_cpu_seconds()
+        >>> _ = sum(i * i for i in range(200_000))
+        >>> process_cpu_seconds() > before
+        True
+    """
+    try:
+        import resource
+    except ImportError:  # not a Unix
+        return time.process_time()
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+@dataclass(frozen=True)
+class AttemptClock:
+    """Wall time and process CPU time since the clock was made (the start of an attempt).
+
+    CPU time is what a run costs on a shared machine: its wall time stretches with
+    whatever else runs on the same cores, its CPU time does not (much).
+
+    Examples:
+        >>> clock = AttemptClock()
+        >>> cost = clock.cost()
+        >>> sorted(cost) == sorted(COST_FIELDS), cost["wall_s"] >= 0, cost["cpu_s"] >= 0
+        (True, True, True)
+    """
+
+    wall_start: float = field(default_factory=time.monotonic)
+    cpu_start: float = field(default_factory=process_cpu_seconds)
+
+    def cost(self) -> dict[str, float]:
+        """``{"wall_s": ..., "cpu_s": ...}`` so far, in seconds (to the millisecond)."""
+        return {
+            "wall_s": round(time.monotonic() - self.wall_start, 3),
+            "cpu_s": round(process_cpu_seconds() - self.cpu_start, 3),
+        }

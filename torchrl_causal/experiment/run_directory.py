@@ -5,7 +5,7 @@ A run directory (``cfg.run_dir``) holds::
     config.yaml              the full resolved config of the run
     window.json              the adjustment window the policy was trained on
     status.json              {"status": "running" | "interrupted" | "failed" | "complete", counters}
-    code.json                every attempt's code, data and runtime (:mod:`~torchrl_causal.experiment.provenance`)
+    code.json                every attempt's code, data, runtime and cost (:mod:`~torchrl_causal.experiment.provenance`)
                              (read as "killed" when it says running and no process holds .lock)
     train.log                the run's log lines (progress, evaluations, resume, errors)
     checkpoints/last.pt      networks, optimisers, schedulers, RNG states and counters (resume)
@@ -710,6 +710,30 @@ class RunDirectory:
         attempts = self.read_attempts()
         self.write_json(self.code_file, {"attempts": [*attempts, {"progress": progress, **identity}]})
         return attempts[-1] if attempts else None
+
+    def record_attempt_cost(self, index: int, cost: Mapping[str, float]) -> bool:
+        """Adds ``cost`` (what :meth:`~torchrl_causal.experiment.provenance.AttemptClock.cost`
+        returns) to the attempt ``index`` of ``code.json`` (0 for the first); returns
+        ``False``, writing nothing, when there is no such attempt (a run that failed before
+        it recorded one, or whose directory was removed).
+
+        Examples:
+            >>> import tempfile
+            >>> run = RunDirectory(tempfile.mkdtemp())
+            >>> run.record_attempt_cost(0, {"wall_s": 2.0, "cpu_s": 1.5})
+            False
+            >>> _ = run.record_attempt({"source": "a"}, progress=0)
+            >>> run.record_attempt_cost(0, {"wall_s": 2.0, "cpu_s": 1.5})
+            True
+            >>> run.read_attempts()
+            [{'progress': 0, 'source': 'a', 'wall_s': 2.0, 'cpu_s': 1.5}]
+        """
+        attempts = self.read_attempts()
+        if not 0 <= index < len(attempts):
+            return False
+        attempts[index] = {**attempts[index], **cost}
+        self.write_json(self.code_file, {"attempts": attempts})
+        return True
 
     # ------------------------------------------------------------------ records
 
