@@ -193,6 +193,7 @@ class SACStyleLossConfig(Target):
     goal_value: Optional[GoalValue] = None  # null: the goal is worth zero (the paper); expert: r_E / (1 - gamma)
     bc_weight: Optional[float] = _ranged(gt=0.0, default=None)  # null: no behaviour-cloning anchor on the actor
     bc_scale: BCScale = BCScale.actor_loss  # the anchor's scale: |loss_actor| (~ mean Q), or r_E / (1 - gamma)
+    bc_separate_pass: bool = False  # true: the anchor's own actor pass, as the runs before issue 56 (their random stream)
 
 
 class GoalValue(str, enum.Enum):
