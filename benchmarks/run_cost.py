@@ -198,9 +198,8 @@ def main() -> None:
     flops = {variant: update_flops(update, batches[0]) for variant, update in variants.items()}
     peaks = {"fp32": matmul_peak(torch.float32), "bf16": matmul_peak(torch.bfloat16)}
     seconds = update_seconds(variants, batches, args.rounds)
-    print(
-        f"\nMatmul peak, one thread, {PEAK_SIZE}-square torch.mm: fp32 {peaks['fp32'] / 1e9:.0f} GFLOP/s, bf16 {peaks['bf16'] / 1e9:.0f} GFLOP/s"
-    )
+    fp32, bf16 = peaks["fp32"] / 1e9, peaks["bf16"] / 1e9
+    print(f"\nMatmul peak, one thread, {PEAK_SIZE}-square torch.mm: fp32 {fp32:.0f} GFLOP/s, bf16 {bf16:.0f} GFLOP/s")
     print(
         f"Updates: batch 256, {obs_dim}-dim input, {action_dim}-dim action, {sizes['hidden']} x {sizes['num_blocks']} networks, "
         f"eager, {args.rounds} alternating rounds of {args.updates}"
@@ -210,9 +209,8 @@ def main() -> None:
     before = seconds["two-pass anchor, fp32 (before)"]
     for variant, value in seconds.items():
         floor = flops[variant] / peaks["bf16" if "bf16" in variant else "fp32"]
-        print(
-            f"| {variant} | {flops[variant] / 1e9:.3f} | {1e3 * value:.2f} | {1e3 * floor:.2f} | {floor / value:.0%} | {before / value:.2f}x |"
-        )
+        gflop, share, speed = flops[variant] / 1e9, floor / value, before / value
+        print(f"| {variant} | {gflop:.3f} | {1e3 * value:.2f} | {1e3 * floor:.2f} | {share:.0%} | {speed:.2f}x |")
     if compiled_update is not None:
         precision = resolve_precision(full_cfg.algo.get("precision"))
         floor = flops["one-pass anchor, fp32"] / peaks[precision]
