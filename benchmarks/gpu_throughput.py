@@ -59,8 +59,10 @@ LOSSES: dict[str, Callable] = {
     "IQLearnLoss K=16": lambda actor, critic: IQLearnLoss(actor, critic, num_value_samples=16),
     "IQLearnLoss K=1": lambda actor, critic: IQLearnLoss(actor, critic, num_value_samples=1),
     # +recipe=goal_valued_bc_anchored's loss options (the warm start runs before training).
-    "SQILLoss recipe": lambda actor, critic: SQILLoss(actor, critic, goal_value="expert", bc_weight=0.4),
-    "IQLearnLoss K=16 recipe": lambda actor, critic: IQLearnLoss(actor, critic, num_value_samples=16, goal_value="expert", bc_weight=0.4),
+    "SQILLoss recipe": lambda actor, critic, **options: SQILLoss(actor, critic, goal_value="expert", bc_weight=0.4, **options),
+    "IQLearnLoss K=16 recipe": lambda actor, critic, **options: IQLearnLoss(
+        actor, critic, num_value_samples=16, goal_value="expert", bc_weight=0.4, **options
+    ),
 }
 TARGETS = {
     ("cuda", "SQILLoss"): ("updates/s", 300.0),
@@ -69,12 +71,14 @@ TARGETS = {
 }
 
 
-def make_batch(device: torch.device, generator: torch.Generator, observation_dim: int = OBSERVATION_DIM) -> TensorDict:
+def make_batch(
+    device: torch.device, generator: torch.Generator, observation_dim: int = OBSERVATION_DIM, action_dim: int = ACTION_DIM
+) -> TensorDict:
     expert = (torch.arange(BATCH) < BATCH // 2).unsqueeze(-1)
     return TensorDict(
         {
             "observation": torch.randn(BATCH, observation_dim, generator=generator),
-            "action": torch.rand(BATCH, ACTION_DIM, generator=generator) * 2 - 1,
+            "action": torch.rand(BATCH, action_dim, generator=generator) * 2 - 1,
             "expert": expert,
             "next": {
                 "observation": torch.randn(BATCH, observation_dim, generator=generator),
@@ -95,12 +99,17 @@ def make_update(
     observation_dim: int = OBSERVATION_DIM,
     hidden: int = HIDDEN,
     num_blocks: int = BLOCKS,
+    action_dim: int = ACTION_DIM,
+    precision: str = "fp32",
+    **loss_options,
 ) -> ActorCriticUpdate:
+    """``name``'s update (:data:`LOSSES`; the recipe losses take ``loss_options``, e.g.
+    ``bc_separate_pass=True``), its matmuls in ``precision``."""
     torch.manual_seed(0)
-    spec = Bounded(-1.0, 1.0, shape=(ACTION_DIM,))
+    spec = Bounded(-1.0, 1.0, shape=(action_dim,))
     actor = make_tanh_gaussian_actor(observation_dim, spec, hidden=hidden, num_blocks=num_blocks, dropout=0.05)
     critic = make_qvalue_network(observation_dim, spec, hidden=hidden, num_blocks=num_blocks)
-    loss = LOSSES[name](actor.to(device), critic.to(device))
+    loss = LOSSES[name](actor.to(device), critic.to(device), **loss_options)
     loss.make_value_estimator(gamma=0.99)
     adam = partial(torch.optim.Adam, lr=3e-4)
     return ActorCriticUpdate(
@@ -113,6 +122,7 @@ def make_update(
         critic_scheduler=torch.optim.lr_scheduler.CosineAnnealingLR,
         cosine_updates=500_000,
         compile=compile,
+        precision=precision,
     )
 
 

@@ -25,12 +25,13 @@ from torchrl.objectives import SoftUpdate
 
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.runs import read_scalar_csv
-from torchrl_causal.experiment import compose_config
-from torchrl_causal.experiment.device import PolicyOnDevice, compile_unavailable, for_cpu_env, resolve_device
+from torchrl_causal.experiment import RunDirectory, compose_config
+from torchrl_causal.experiment.device import PolicyOnDevice, bf16_unavailable, compile_unavailable, for_cpu_env, resolve_device
 from torchrl_causal.experiment.schema import ConfigValueError, validate_config
+from torchrl_causal.experiment.timing import PartTimer
 from torchrl_causal.lifecycle import run
 from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
-from torchrl_causal.objectives import IQLearnLoss
+from torchrl_causal.objectives import IQLearnLoss, SQILLoss
 from torchrl_causal.trainers import Trainer
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
@@ -270,15 +271,15 @@ def test_compile_without_a_cxx_compiler_is_refused_before_a_run_directory_exists
     validate_config(compose_config([f"run_root={tmp_path}", "env=route_choice", "algo=sqil", "compile=false"]))
 
 
-def _iq_learn_update(compile: bool) -> ActorCriticUpdate:
+def _recipe_update(compile: bool, loss_class: type = IQLearnLoss, precision: str = "fp32") -> ActorCriticUpdate:
     torch.manual_seed(0)
     spec = Bounded(-1.0, 1.0, shape=(2,))
-    loss = IQLearnLoss(
+    loss = loss_class(
         make_tanh_gaussian_actor(3, spec, hidden=16, num_blocks=1, dropout=0.05),
         make_qvalue_network(3, spec, hidden=16, num_blocks=1),
-        num_value_samples=2,
         goal_value="expert",
         bc_weight=0.4,
+        **({"num_value_samples": 2} if loss_class is IQLearnLoss else {}),
     )  # the recipe's options: they once split the graph
     loss.make_value_estimator(gamma=0.99)
     adam = partial(torch.optim.Adam, lr=1e-2)
@@ -292,6 +293,7 @@ def _iq_learn_update(compile: bool) -> ActorCriticUpdate:
         critic_scheduler=torch.optim.lr_scheduler.CosineAnnealingLR,
         cosine_updates=5,
         compile=compile,
+        precision=precision,
     )
 
 
@@ -328,7 +330,7 @@ def test_compiled_update_matches_eager() -> None:
     """
     results = {}
     for compile in (False, True):
-        update = _iq_learn_update(compile)
+        update = _recipe_update(compile)
         torch.manual_seed(2)
         scalars = torch.stack([update(batch) for batch in _batches(3)])
         results[compile] = scalars, {k: v.detach().clone() for k, v in update.loss.state_dict().items()}
@@ -336,6 +338,92 @@ def test_compiled_update_matches_eager() -> None:
     for key, value in results[False][1].items():
         torch.testing.assert_close(results[True][1][key], value, rtol=1e-5, atol=1e-5, msg=key)
     assert not torch.equal(results[False][1]["log_alpha"], torch.zeros(()))  # the updates did move things
+
+
+# Two graphs: ~40 s of CPU, and inductor's C++ compiler besides. Its wall time is whatever CPU
+# the machine spares (48 min at a niced sliver of two busy cores), so no wall-clock limit.
+@pytest.mark.slow
+@pytest.mark.timeout(0)
+@pytest.mark.skipif(COMPILE_UNAVAILABLE is not None, reason=str(COMPILE_UNAVAILABLE))
+def test_the_compiled_warm_start_critic_phase_matches_eager() -> None:
+    """The warm start's critic-only steps compiled (a graph of their own) give eager's
+    critic losses, and the joint update compiled after them in the same process (the
+    trainer's order) gives eager's scalars and weights: the recipe's IQ-Learn loss, dropout on."""
+    results = {}
+    for compile in (False, True):
+        update = _recipe_update(compile)
+        torch.manual_seed(2)
+        critic = torch.stack([update.critic_step(batch) for batch in _batches(3)])
+        joint = torch.stack([update(batch) for batch in _batches(2)])
+        results[compile] = critic, joint, {k: v.detach().clone() for k, v in update.loss.state_dict().items()}
+    assert update.updates == 2 and not torch.equal(results[True][0][0], results[True][0][-1])
+    torch.testing.assert_close(results[True][0], results[False][0], rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(results[True][1], results[False][1], rtol=1e-5, atol=1e-5)
+    for key, value in results[False][2].items():
+        torch.testing.assert_close(results[True][2][key], value, rtol=1e-5, atol=1e-5, msg=key)
+
+
+# ---------------------------------------------------------------------------- bf16
+
+
+BF16_UNAVAILABLE = bf16_unavailable(torch.device("cpu"))
+
+
+def test_a_bf16_update_runs_its_matmuls_in_bf16_and_keeps_its_state_in_fp32() -> None:
+    """``precision="bf16"``: every linear layer of the loss computes in bf16, while the
+    losses, the parameters, their gradients and Adam's moments stay fp32; from the same
+    state and draws, its losses are the fp32 update's to bf16's ~3 significant digits."""
+    scalars, states = {}, {}
+    for precision in ("fp32", "bf16"):
+        update = _recipe_update(False, loss_class=SQILLoss, precision=precision)
+        seen: set[torch.dtype] = set()
+        networks = (update.loss.actor_network, update.loss.qvalue_network)
+        linears = [m for network in networks for m in network.modules() if isinstance(m, torch.nn.Linear)]
+        hooks = [m.register_forward_hook(lambda m, i, o: seen.add(o.dtype)) for m in linears]
+        torch.manual_seed(2)
+        batch = _batches(1)[0]
+        with torch.no_grad():
+            total, _ = update.losses(batch.clone())
+        assert total.dtype == torch.float32
+        torch.manual_seed(2)
+        scalars[precision] = update(batch)
+        for hook in hooks:
+            hook.remove()
+        assert seen == {torch.bfloat16 if precision == "bf16" else torch.float32}, precision
+        params = [*update.critic_params, *update.actor_params, update.loss.log_alpha]
+        assert all(p.dtype == torch.float32 and (p.grad is None or p.grad.dtype == torch.float32) for p in params)
+        moments = [t for o in update.optimizers for s in o.state.values() for t in s.values() if t.ndim]
+        assert moments and all(t.dtype == torch.float32 for t in moments)
+        states[precision] = {k: v.detach().clone() for k, v in update.loss.state_dict().items()}
+    assert scalars["bf16"].dtype == torch.float32
+    torch.testing.assert_close(scalars["bf16"], scalars["fp32"], rtol=2e-2, atol=1e-3)
+    assert not torch.equal(scalars["bf16"], scalars["fp32"])  # bf16 did run: the numbers differ
+
+
+def test_bf16_is_refused_in_one_line_where_the_cpu_lacks_native_bf16(tmp_path: Path, monkeypatch) -> None:
+    from torchrl_causal.experiment import schema
+
+    monkeypatch.setattr(schema, "bf16_unavailable", lambda device: bf16_unavailable(device, cpu_flags=frozenset({"avx2", "fma"})))
+    cfg = compose_config([f"run_root={tmp_path}", "env=route_choice", "algo=sqil", "algo.precision=bf16"])
+    with pytest.raises(ConfigValueError, match=r"^algo.precision=bf16 cannot run natively on cpu here: .*avx512_bf16 nor amx_bf16[^\n]*$"):
+        run(cfg)
+    assert not any(tmp_path.iterdir())
+    validate_config(compose_config([f"run_root={tmp_path}", "env=route_choice", "algo=sqil", "algo.precision=fp32"]))
+
+
+@pytest.mark.skipif(BF16_UNAVAILABLE is not None, reason=str(BF16_UNAVAILABLE))
+def test_a_run_records_its_precision_and_the_cost_of_its_parts(tmp_path: Path) -> None:
+    """A tiny BC run with ``algo.precision=bf16`` records it beside ``compile`` and
+    ``device``; a :class:`PartTimer` recording the run splits its whole time into parts."""
+    cfg = tiny_config(tmp_path, "rovermaze_u", "bc", True, "algo.epochs=2", "algo.precision=bf16")
+    timer = PartTimer()
+    with timer.recording():
+        run(cfg)
+    attempt = RunDirectory(cfg.run_dir).read_attempts()[-1]
+    assert (attempt["precision"], attempt["compile"], attempt["device"]) == ("bf16", False, "cpu")
+    assert {"setup", "updates", "evaluation", "checkpoints"} <= set(timer.cpu)
+    assert timer.calls["updates"] == 2 and min(timer.wall.values()) >= 0
+    assert sum(timer.wall.values()) == pytest.approx(timer.total_wall) and timer.total_wall > 0
 
 
 # ---------------------------------------------------------------------------- collection

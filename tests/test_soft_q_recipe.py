@@ -28,7 +28,7 @@ from torchrl.data import Bounded
 from torchrl.objectives import SoftUpdate
 
 from torchrl_causal.modules import make_qvalue_network, make_tanh_gaussian_actor
-from torchrl_causal.objectives import IQLearnLoss, SQILLoss, add_absorbing_transitions
+from torchrl_causal.objectives import IQLearnLoss, SQILLoss, add_absorbing_transitions, eval_mode
 from torchrl_causal.trainers.update import ActorCriticUpdate
 
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
@@ -187,6 +187,42 @@ def test_behaviour_cloning_anchor_is_td3_bc_on_the_expert_rows(bc_scale: str) ->
     assert all(p.grad is None for p in loss.qvalue_network_params.values(True, True))
     assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in loss.actor_network_params.values(True, True))
     assert "loss_bc" not in _actor_and_loss()[1](batch.clone()).keys()
+
+
+@pytest.mark.parametrize("cls", [SQILLoss, IQLearnLoss])
+def test_the_one_pass_anchor_is_the_separate_pass_anchor_up_to_the_dropout_mask(cls) -> None:
+    """The anchor read off the actor loss's own pass against today's second actor pass
+    (``bc_separate_pass=True``, SAC's actor loss and :meth:`behaviour_cloning_anchor`): the
+    same value and actor gradient without dropout (eval mode), and with dropout the same
+    actor loss from the same random state (the one pass draws SAC's mask and noise, in order)."""
+    torch.manual_seed(0)
+    spec = Bounded(-1.0, 1.0, shape=(2,))
+    actor = make_tanh_gaussian_actor(3, spec, hidden=8, num_blocks=1, dropout=0.2, log_std_init=-0.5)
+    loss = cls(actor, make_qvalue_network(3, spec, hidden=8, num_blocks=1), alpha_init=0.05, bc_weight=0.4, goal_value="expert")
+    loss.make_value_estimator(gamma=0.99)
+    batch = _batch()
+    params = list(loss.actor_network_params.values(True, True))
+
+    def run(separate: bool) -> tuple[dict[str, torch.Tensor], list[torch.Tensor]]:
+        loss.bc_separate_pass = separate
+        torch.manual_seed(3)
+        data = batch.clone()
+        out = loss(data)
+        # SAC's priority and actor outputs aside, nothing is left in the batch (the pass's action is taken back)
+        assert set(data.keys(True, True)) - set(batch.keys(True, True)) <= {"td_error", "loc", "scale"}
+        grads = torch.autograd.grad(out["loss_actor"] + out["loss_bc"], params, allow_unused=True)
+        return {key: value.detach() for key, value in out.items()}, [torch.zeros_like(p) if g is None else g for g, p in zip(grads, params)]
+
+    with eval_mode(actor):
+        (one, one_grads), (two, two_grads) = run(False), run(True)
+    assert one["loss_bc"] > 0
+    torch.testing.assert_close(one, two, rtol=1e-6, atol=0)
+    for a, b in zip(one_grads, two_grads):
+        torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-7)
+    assert sum(g.abs().sum() for g in one_grads) > 0
+    (one, _), (two, _) = run(False), run(True)  # train mode: dropout 0.2
+    assert torch.equal(one["loss_actor"], two["loss_actor"]) and torch.equal(one["loss_qvalue"], two["loss_qvalue"])
+    assert not torch.equal(one["loss_bc"], two["loss_bc"])  # another mask for the separate pass
 
 
 def test_the_expert_value_scale_keeps_the_anchor_when_the_critics_value_is_near_zero() -> None:

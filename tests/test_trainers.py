@@ -397,8 +397,8 @@ def test_a_resume_under_other_code_is_logged_and_recorded(tmp_path: Path, monkey
         run(cfg)
     identity = base.attempt_identity
 
-    def edited(demonstrations, compile: bool, device) -> dict:
-        return {**identity(demonstrations, compile, device), "source": "0123456789ab"}
+    def edited(demonstrations, compile: bool, device, **kwargs) -> dict:
+        return {**identity(demonstrations, compile, device, **kwargs), "source": "0123456789ab"}
 
     monkeypatch.setattr(base, "attempt_identity", edited)
     with caplog.at_level("WARNING"):

@@ -38,6 +38,7 @@ from torchrl_causal.experiment.memory import check_run_fits
 from torchrl_causal.experiment.provenance import AttemptClock, attempt_identity
 from torchrl_causal.experiment.run_directory import CheckpointError, RunDirectory
 from torchrl_causal.experiment.schema import ConfigValueError, validate_config
+from torchrl_causal.experiment.timing import timed
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.trainers.base import Trainer
 
@@ -209,7 +210,8 @@ def _train_and_evaluate(
         trainer = trainer_class(cfg, run_dir, window, evaluator.periodic, device=device)
         trainer.fit()
         policy = trainer.best_policy()
-    results = evaluator.final(policy)
+    with timed("evaluation"):
+        results = evaluator.final(policy)
     for regime, result in results.items():
         run_dir.write_json(run_dir.eval_path(regime), evaluator.record(result))
         log.info(

@@ -5,7 +5,8 @@
 * :class:`RunDirectory` holds a run's files (config, checkpoints, status, evaluations);
 * :mod:`~torchrl_causal.experiment.device` resolves where tensors live,
   :mod:`~torchrl_causal.experiment.provenance` what produced a run,
-  :mod:`~torchrl_causal.experiment.interrupts` how SIGINT/SIGTERM stop one cleanly;
+  :mod:`~torchrl_causal.experiment.interrupts` how SIGINT/SIGTERM stop one cleanly,
+  :mod:`~torchrl_causal.experiment.timing` what each part of one costs;
 * :mod:`~torchrl_causal.experiment.builders` turns a resolved config into envs, the
   adjustment window, policies and demonstrations.
 

@@ -8,10 +8,12 @@ actions back (``env_device`` / ``policy_device`` / ``storing_device``);
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import sys
 from collections.abc import Callable
+from functools import cache
 from typing import Any
 
 import torch
@@ -23,9 +25,27 @@ from tensordict.nn import TensorDictModuleBase
 from torchrl_causal.compat import dynamo_supported
 from torchrl_causal.errors import InvalidValueError
 
-__all__ = ["DeviceCheck", "PolicyOnDevice", "compile_unavailable", "for_cpu_env", "resolve_device"]
+__all__ = [
+    "BF16_CPU_FLAGS",
+    "PRECISIONS",
+    "DeviceCheck",
+    "PolicyOnDevice",
+    "bf16_unavailable",
+    "compile_unavailable",
+    "for_cpu_env",
+    "matmul_precision",
+    "resolve_device",
+    "resolve_precision",
+]
 
 CPU = torch.device("cpu")
+
+#: ``algo.precision`` -> the dtype the updates' matmuls run in (``None``: fp32, no autocast).
+PRECISIONS: dict[str, torch.dtype | None] = {"fp32": None, "bf16": torch.bfloat16}
+
+#: The ``/proc/cpuinfo`` flags of an x86 CPU with native bf16 matmuls (AVX-512 BF16, AMX).
+#: Without one, oneDNN emulates bf16 through fp32 and a bf16 update is slower than fp32's.
+BF16_CPU_FLAGS: tuple[str, ...] = ("avx512_bf16", "amx_bf16")
 
 
 def _available(device: torch.device) -> str | None:
@@ -56,6 +76,85 @@ def compile_unavailable(device: torch.device) -> str | None:
     if device.type == "cpu" and not (os.environ.get("CXX") or any(shutil.which(cxx) for cxx in ("g++", "c++", "clang++"))):
         return "torch.compile's CPU backend (inductor) needs a C++ compiler, and none is on PATH (nor in $CXX)"
     return None
+
+
+@cache
+def _cpu_flags() -> frozenset[str]:
+    """The CPU's feature flags (``flags`` on x86, ``Features`` on ARM, in ``/proc/cpuinfo``);
+    empty where the file does not exist (macOS, Windows)."""
+    try:
+        with open("/proc/cpuinfo") as handle:
+            for line in handle:
+                if line.startswith(("flags", "Features")) and ":" in line:
+                    return frozenset(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return frozenset()
+
+
+def bf16_unavailable(device: torch.device, cpu_flags: frozenset[str] | None = None) -> str | None:
+    """Why ``algo.precision=bf16`` would not run natively on ``device`` here, or ``None``.
+
+    On the CPU it needs :data:`BF16_CPU_FLAGS` (x86) or ``bf16`` (ARM) among the CPU's flags
+    (``cpu_flags``, or this machine's ``/proc/cpuinfo``) and oneDNN
+    (``torch.backends.mkldnn``); on CUDA, ``torch.cuda.is_bf16_supported()``. Where it is
+    missing, bf16 is emulated and slower than fp32, so ``validate_config`` refuses the
+    option with this reason instead of running it.
+
+    Examples:
+        >>> bf16_unavailable(torch.device("cpu"), cpu_flags=frozenset({"avx512f", "avx512_bf16"})) is None
+        True
+        >>> bf16_unavailable(torch.device("cpu"), cpu_flags=frozenset({"avx2"}))
+        "the CPU has no native bf16 matmuls (neither avx512_bf16 nor amx_bf16 in /proc/cpuinfo's flags)"
+    """
+    if device.type == "cpu":
+        if not torch.backends.mkldnn.is_available():
+            return "this torch is built without oneDNN (torch.backends.mkldnn.is_available() is False)"
+        flags = _cpu_flags() if cpu_flags is None else cpu_flags
+        if not flags & {*BF16_CPU_FLAGS, "bf16"}:
+            return f"the CPU has no native bf16 matmuls (neither {' nor '.join(BF16_CPU_FLAGS)} in /proc/cpuinfo's flags)"
+        return None
+    if device.type == "cuda":
+        return None if torch.cuda.is_bf16_supported() else f"{torch.cuda.get_device_name(device)} has no bf16 support"
+    return f"bf16 updates run on cpu and cuda, not {device.type}"
+
+
+def resolve_precision(value: Any) -> str:
+    """``algo.precision`` as one of :data:`PRECISIONS`' names: ``None`` (the key's default,
+    which runs made before it existed hold as its absence) is ``"fp32"``.
+
+    Examples:
+        >>> resolve_precision(None), resolve_precision("bf16")
+        ('fp32', 'bf16')
+        >>> resolve_precision("fp16")
+        Traceback (most recent call last):
+        ...
+        ValueError: precision='fp16' must be one of fp32, bf16
+    """
+    name = "fp32" if value is None else str(getattr(value, "value", value))  # a config's str enum, or a str
+    if name not in PRECISIONS:
+        raise ValueError(f"precision={name!r} must be one of {', '.join(PRECISIONS)}")
+    return name
+
+
+def matmul_precision(precision: str, device: torch.device) -> contextlib.AbstractContextManager:
+    """The context an update's forward runs in: ``"fp32"``, none; ``"bf16"``,
+    :class:`torch.autocast` to bfloat16 on ``device``'s type, so matmuls (and the
+    activations between them) run in bf16 while the parameters, their gradients and the
+    optimiser state stay fp32. The networks hand their outputs back in their parameters'
+    dtype (:class:`~torchrl_causal.modules.ResidualMLP`), so the losses reduce in fp32.
+
+    Examples:
+        >>> linear = torch.nn.Linear(4, 2)
+        >>> with matmul_precision("bf16", torch.device("cpu")):
+        ...     linear(torch.ones(3, 4)).dtype
+        torch.bfloat16
+        >>> with matmul_precision("fp32", torch.device("cpu")):
+        ...     linear(torch.ones(3, 4)).dtype
+        torch.float32
+    """
+    dtype = PRECISIONS[resolve_precision(precision)]
+    return contextlib.nullcontext() if dtype is None else torch.autocast(device.type, dtype=dtype)
 
 
 def resolve_device(spec: str | torch.device) -> torch.device:

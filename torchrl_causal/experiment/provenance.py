@@ -53,7 +53,7 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1]
 #: The fields of an attempt that change a run's numbers when they change (another CPU or
 #: thread count changes floating-point summation order; another numpy, mujoco or TorchRL
 #: changes the envs' and collectors' arithmetic).
-RUNTIME_FIELDS: tuple[str, ...] = ("source", "torch", "packages", "cpu", "threads", "demonstrations", "compile", "device")
+RUNTIME_FIELDS: tuple[str, ...] = ("source", "torch", "packages", "cpu", "threads", "demonstrations", "compile", "device", "precision")
 
 #: What an attempt records of its cost when it ends (:meth:`AttemptClock.cost`).
 COST_FIELDS: tuple[str, ...] = ("wall_s", "cpu_s")
@@ -128,16 +128,19 @@ def machine_identity() -> dict[str, object]:
     return {"packages": package_versions(), "cpu": cpu_model(), "threads": torch.get_num_threads(), "cores": os.cpu_count()}
 
 
-def attempt_identity(demonstrations: str | None, compile: bool, device: str | torch.device) -> dict[str, Any]:
+def attempt_identity(demonstrations: str | None, compile: bool, device: str | torch.device, precision: str = "fp32") -> dict[str, Any]:
     """What an attempt trains under: the library's :func:`source_fingerprint`, torch's and
     Python's versions, the demonstration set's checksum (``demonstrations``, its first 12
-    hex digits are kept; ``None`` for none), whether it compiles, on which device, and the
+    hex digits are kept; ``None`` for none), whether it compiles, on which device, in which
+    precision its updates run (``algo.precision``: ``fp32`` or ``bf16``), and the
     :func:`machine_identity` (package versions, CPU, threads).
 
     Examples:
         >>> identity = attempt_identity("b34e70289b3df979", compile=False, device="cpu")
-        >>> sorted(identity), identity["demonstrations"]
-        (['compile', 'cores', 'cpu', 'demonstrations', 'device', 'packages', 'python', 'source', 'threads', 'torch'], 'b34e70289b3d')
+        >>> sorted(identity)
+        ['compile', 'cores', 'cpu', 'demonstrations', 'device', 'packages', 'precision', 'python', 'source', 'threads', 'torch']
+        >>> identity["demonstrations"], identity["precision"]
+        ('b34e70289b3d', 'fp32')
     """
     return {
         "source": source_fingerprint(),
@@ -146,6 +149,7 @@ def attempt_identity(demonstrations: str | None, compile: bool, device: str | to
         "demonstrations": None if demonstrations is None else demonstrations[:12],
         "compile": bool(compile),
         "device": str(device),
+        "precision": precision,
         **machine_identity(),
     }
 

@@ -40,7 +40,7 @@ from omegaconf import MISSING, DictConfig, OmegaConf
 from torchrl_causal.algorithms import ROWS, algorithm
 from torchrl_causal.compat import config_child, config_holds_value
 from torchrl_causal.errors import TorchRLCausalError
-from torchrl_causal.experiment.device import compile_unavailable, resolve_device
+from torchrl_causal.experiment.device import bf16_unavailable, compile_unavailable, resolve_device
 
 __all__ = [
     "ALGO_SCHEMAS",
@@ -193,12 +193,20 @@ class SACStyleLossConfig(Target):
     goal_value: Optional[GoalValue] = None  # null: the goal is worth zero (the paper); expert: r_E / (1 - gamma)
     bc_weight: Optional[float] = _ranged(gt=0.0, default=None)  # null: no behaviour-cloning anchor on the actor
     bc_scale: BCScale = BCScale.actor_loss  # the anchor's scale: |loss_actor| (~ mean Q), or r_E / (1 - gamma)
+    bc_separate_pass: bool = False  # true: the anchor's own actor pass, as the runs before issue 56 (their random stream)
 
 
 class GoalValue(str, enum.Enum):
     """``goal_value=...`` of the SQIL / IQ-Learn losses (null: zero, the paper's objective)."""
 
     expert = "expert"
+
+
+class Precision(str, enum.Enum):
+    """``algo.precision`` of the soft-Q and BC updates (null: fp32, the default)."""
+
+    fp32 = "fp32"
+    bf16 = "bf16"  # matmuls under a bf16 autocast; weights, optimiser state and loss reductions fp32
 
 
 @dataclass
@@ -368,6 +376,8 @@ class BCConfig(TrainedAlgoConfig):
     epochs: int = at_least()
     patience: int = at_least()
     val_fraction: float = unit_interval(open_low=True, open_high=True)
+    # null (fp32, what every run made before the key existed holds) or bf16: the updates' matmuls
+    precision: Optional[Precision] = None
 
 
 @dataclass
@@ -402,6 +412,8 @@ class OffPolicyConfig(TrainedAlgoConfig):
     critic_scheduler: Optional[CosineScheduleConfig] = MISSING  # None: a constant learning rate
     schedule_updates: Optional[int] = _ranged(ge=1, default=None)  # the schedule's span; null: the run's updates
     warm_start: Optional[WarmStartConfig] = None  # null: the paper's cold start (random warm-up actions)
+    # null (fp32, what every run made before the key existed holds) or bf16: the updates' matmuls
+    precision: Optional[Precision] = None
     batch_size: int = at_least(2)
     max_grad_norm: float = positive()
     buffer_size: int = at_least()
@@ -580,6 +592,10 @@ def _check_device(cfg: DictConfig) -> None:
     reason = compile_unavailable(device) if cfg.compile else None
     if reason:
         raise ConfigValueError(f"compile=true cannot run on {device} here: {reason}; set compile=false")
+    precision = OmegaConf.select(cfg, "algo.precision")
+    reason = bf16_unavailable(device) if precision is not None and Precision(precision) is Precision.bf16 else None
+    if reason:
+        raise ConfigValueError(f"algo.precision=bf16 cannot run natively on {device} here: {reason}; set algo.precision=fp32")
 
 
 def _check_algorithm(cfg: DictConfig) -> None:

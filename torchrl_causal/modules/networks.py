@@ -15,7 +15,7 @@ from torch import nn
 
 from torchrl_causal.errors import InvalidValueError
 
-__all__ = ["ResidualBlock", "ResidualMLP", "SkipMLP", "Standardize", "fit_standardizers"]
+__all__ = ["AutocastLinear", "ResidualBlock", "ResidualMLP", "SkipMLP", "Standardize", "fit_standardizers"]
 
 
 def _check_positive(name: str, value: int) -> None:
@@ -33,6 +33,34 @@ def _concat(inputs: tuple[torch.Tensor, ...]) -> torch.Tensor:
     return inputs[0] if len(inputs) == 1 else torch.cat(inputs, dim=-1)
 
 
+def _autocast_dtype(device_type: str) -> torch.dtype | None:
+    """The dtype of an enclosing :class:`torch.autocast` on ``device_type``, or ``None``."""
+    return torch.get_autocast_dtype(device_type) if torch.is_autocast_enabled(device_type) else None
+
+
+class AutocastLinear(nn.Linear):
+    """:class:`torch.nn.Linear` that computes in an enclosing autocast's dtype even inside
+    :func:`torch.vmap`, which autocast does not reach (the twin critics are vmapped: under
+    ``algo.precision=bf16`` their matmuls would stay fp32). Without autocast it is
+    ``nn.Linear``, the same parameters and state-dict keys.
+
+    Examples:
+        >>> layer = AutocastLinear(4, 2)
+        >>> with torch.autocast("cpu", dtype=torch.bfloat16):
+        ...     torch.vmap(layer)(torch.ones(3, 5, 4)).dtype
+        torch.bfloat16
+        >>> layer(torch.ones(3, 4)).dtype
+        torch.float32
+    """
+
+    def forward(self, input: torch.Tensor) -> torch.Tensor:
+        dtype = _autocast_dtype(input.device.type)
+        if dtype is None:
+            return super().forward(input)
+        bias = None if self.bias is None else self.bias.to(dtype)
+        return nn.functional.linear(input.to(dtype), self.weight.to(dtype), bias)
+
+
 def _unbroadcast(tensor: torch.Tensor) -> torch.Tensor:
     """``tensor`` with every leading dim that ``expand`` repeated (stride 0) cut to size 1."""
     for dim in range(tensor.ndim - 1):
@@ -45,9 +73,10 @@ def _project_parts(projection: nn.Linear, collapsed: list[torch.Tensor], batch_s
     """``projection(cat(inputs))`` as a sum of one linear map per input, each on the input
     with its expanded dims cut to size 1 (``collapsed``): an input shared by K rows is
     projected once, and the sum is broadcast back to ``batch_shape``."""
-    weights = projection.weight.split([t.shape[-1] for t in collapsed], dim=-1)
-    parts = [nn.functional.linear(t, w) for t, w in zip(collapsed, weights)]
-    out = sum(parts[1:], parts[0]) + projection.bias
+    dtype = _autocast_dtype(collapsed[0].device.type) or projection.weight.dtype  # as AutocastLinear computes
+    weights = projection.weight.to(dtype).split([t.shape[-1] for t in collapsed], dim=-1)
+    parts = [nn.functional.linear(t.to(dtype), w) for t, w in zip(collapsed, weights)]
+    out = sum(parts[1:], parts[0]) + projection.bias.to(dtype)
     return out.expand(*batch_shape, out.shape[-1])
 
 
@@ -132,11 +161,11 @@ class ResidualBlock(nn.Module):
         self.body = nn.Sequential(
             nn.LayerNorm(width),
             nn.SiLU(),
-            nn.Linear(width, width),
+            AutocastLinear(width, width),
             nn.LayerNorm(width),
             nn.SiLU(),
             nn.Dropout(dropout),
-            nn.Linear(width, width),
+            AutocastLinear(width, width),
         )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -184,9 +213,9 @@ class ResidualMLP(nn.Module):
         if not isinstance(num_blocks, int) or num_blocks < 0:
             raise InvalidValueError(f"num_blocks must be a non-negative integer, got {num_blocks!r}.")
         self.in_features = in_features
-        self.projection = nn.Linear(in_features, hidden)
+        self.projection = AutocastLinear(in_features, hidden)
         self.blocks = nn.Sequential(*(ResidualBlock(hidden, dropout) for _ in range(num_blocks)))
-        self.head = nn.Linear(hidden, out_features)
+        self.head = AutocastLinear(hidden, out_features)
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
         features = sum(t.shape[-1] for t in inputs)
@@ -201,7 +230,9 @@ class ResidualMLP(nn.Module):
             x = _project_parts(self.projection, collapsed, inputs[0].shape[:-1])
         else:
             x = self.projection(_concat(inputs))
-        return self.head(self.blocks(x))
+        # In the parameters' dtype: under a bf16 autocast (algo.precision=bf16) the matmuls
+        # and activations are bf16, and the losses reading this output reduce in fp32.
+        return self.head(self.blocks(x)).to(self.head.weight.dtype)
 
 
 class SkipMLP(nn.Module):

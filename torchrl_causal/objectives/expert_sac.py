@@ -19,8 +19,9 @@ from tensordict.nn import ProbabilisticTensorDictSequential, TensorDictModule, d
 from tensordict.utils import NestedKey
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives import SACLoss
+from torchrl.objectives.sac import compute_rsample_log_prob
 
-from torchrl_causal.compat import SACLossWithHooks
+from torchrl_causal.compat import SACLossWithHooks, entropy_coefficient, priority_weights, qvalues_per_critic, reduce_loss
 from torchrl_causal.errors import InvalidValueError, UnknownKeyError
 from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingIndicator
 from torchrl_causal.objectives.utils import eval_mode
@@ -42,6 +43,11 @@ BC_SCALES: tuple[str, ...] = ("actor_loss", "expert_value")
 #: Expert actions are clipped this far inside the action bounds before their
 #: log-likelihood is taken: a tanh-Gaussian gives the bounds themselves density zero.
 _BC_ACTION_MARGIN = 1e-3
+
+#: Where :meth:`ExpertFlaggedSACLoss.actor_loss` leaves its pass's deterministic action for
+#: the anchor in :meth:`~ExpertFlaggedSACLoss.forward` (SACLoss's forward keeps only the
+#: actor loss's log-probability); ``forward`` removes it from the batch again.
+_BC_ACTION_KEY = "_bc_deterministic_action"
 
 
 class ExpertFlaggedSACLoss(SACLossWithHooks):
@@ -98,6 +104,13 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
             (55% after the same 500 updates) but stays as strong for the whole run, and one
             400k-step C-SQIL run with it ended below the default (65.2% against 77.4% at
             deployment, ``results/antmaze_medium_recipe.md``).
+        bc_separate_pass (bool, optional): ``False`` (default): the anchor reads the
+            deterministic action of the actor loss's own pass over the batch (one actor
+            forward per update, the same dropout mask). ``True``: the anchor runs a second
+            actor pass with a fresh dropout mask (:meth:`behaviour_cloning_anchor`), as every
+            run did before issue 56; it costs an actor forward and backward per update and
+            draws one more dropout mask, so it reproduces the random stream, and the numbers,
+            of the recipe runs made then. Equal values and gradients without dropout.
         **kwargs: forwarded to :class:`~torchrl.objectives.SACLoss`.
     """
 
@@ -128,6 +141,7 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
         goal_value: Literal["expert"] | None = None,
         bc_weight: float | None = None,
         bc_scale: Literal["actor_loss", "expert_value"] = "actor_loss",
+        bc_separate_pass: bool = False,
         **kwargs,
     ) -> None:
         if not 0.0 < min_alpha <= max_alpha:
@@ -157,6 +171,7 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
         self.goal_value = goal_value
         self.bc_weight = bc_weight
         self.bc_scale = bc_scale
+        self.bc_separate_pass = bool(bc_separate_pass)
 
     #: The per-step reward of an expert transition in the critic's target (SQIL's label;
     #: subclasses whose critic reward is implicit say what it is).
@@ -216,23 +231,59 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
             log_prob = dist.log_prob(actions)
         return -(weights.squeeze(-1) * log_prob.reshape(weights.shape[:-1])).sum()
 
-    def behaviour_cloning_anchor(self, tensordict: TensorDictBase) -> torch.Tensor:
-        """Mean squared error between the actor's deterministic action and the expert rows' actions."""
+    def anchor_error(self, deterministic_action: torch.Tensor, tensordict: TensorDictBase) -> torch.Tensor:
+        """Mean squared error between ``deterministic_action`` (the actor's, one row per row of
+        the batch) and the expert rows' actions, averaged over the expert rows."""
         actions, weights = self.expert_actions(tensordict)
+        return (weights * (deterministic_action - actions).pow(2).mean(-1, keepdim=True)).sum()
+
+    def behaviour_cloning_anchor(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """:meth:`anchor_error` of the actor's deterministic action from an actor pass of its
+        own (``bc_separate_pass=True``; the actor loss's pass gives it otherwise)."""
         with (
             set_exploration_type(ExplorationType.DETERMINISTIC),
             self.actor_network_params.to_module(self.actor_network, preserve_module_state=False),
         ):
             dist = self.actor_network.get_dist(tensordict.select(*self.actor_network.in_keys, strict=False))
             mode = dist.deterministic_sample
-        return (weights * (mode - actions).pow(2).mean(-1, keepdim=True)).sum()
+        return self.anchor_error(mode, tensordict)
+
+    def actor_loss(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """SAC's actor loss, ``mean(alpha log pi(a|z) - min_j Q_j(z, a))`` with ``a`` reparameterised.
+
+        With the one-pass anchor (``bc_weight`` set, ``bc_separate_pass=False``) the same
+        distribution also gives the anchor's deterministic action, left in the batch for
+        :meth:`forward`. The draws (the dropout mask, then the
+        action noise) are SAC's, in SAC's order, so ``loss_actor`` is the number SAC's own
+        actor loss gives with the same random state. Without the anchor this is SAC's.
+        """
+        if self.bc_weight is None or self.bc_separate_pass:
+            return super().actor_loss(tensordict)
+        weights = priority_weights(self, tensordict)
+        with (
+            set_exploration_type(ExplorationType.RANDOM),
+            self.actor_network_params.to_module(self.actor_network, preserve_module_state=False),
+        ):
+            dist = self.actor_network.get_dist(tensordict)
+            action, log_prob = compute_rsample_log_prob(dist)
+        critic_input = tensordict.select(*self.qvalue_network.in_keys, strict=False)
+        critic_input.set(self.tensor_keys.action, action)
+        # The critics' parameters detached: the actor loss moves the actor only.
+        q = qvalues_per_critic(self, critic_input, self.qvalue_network_params.detach()).get(self.tensor_keys.state_action_value)
+        loss = reduce_loss(self, entropy_coefficient(self) * log_prob - q.min(0)[0].squeeze(-1), tensordict=tensordict, weights=weights)
+        tensordict.set(_BC_ACTION_KEY, dist.deterministic_sample)
+        return loss, {"log_prob": log_prob.detach()}
 
     @dispatch
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         out = super().forward(tensordict)
         if self.bc_weight is not None:
             scale = out["loss_actor"].detach().abs() if self.bc_scale == "actor_loss" else self.expert_value
-            out.set("loss_bc", self.bc_weight * scale * self.behaviour_cloning_anchor(tensordict))
+            if self.bc_separate_pass:
+                anchor = self.behaviour_cloning_anchor(tensordict)
+            else:
+                anchor = self.anchor_error(tensordict.pop(_BC_ACTION_KEY), tensordict)
+            out.set("loss_bc", self.bc_weight * scale * anchor)
         return out
 
     @property

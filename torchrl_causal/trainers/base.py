@@ -36,10 +36,11 @@ from torchrl.record.loggers import Logger
 from torchrl_causal.data.sources import source_checksum
 from torchrl_causal.errors import InvalidStateError
 from torchrl_causal.experiment.builders import expert_transitions, load_or_collect_demonstrations
-from torchrl_causal.experiment.device import resolve_device
+from torchrl_causal.experiment.device import resolve_device, resolve_precision
 from torchrl_causal.experiment.interrupts import RunInterrupted, deferred_signals
 from torchrl_causal.experiment.provenance import attempt_identity, identity_changes
 from torchrl_causal.experiment.run_directory import TRAIN_CURVE, ConfigMismatchError, RunDirectory, atomic_write_text
+from torchrl_causal.experiment.timing import timed
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.progress import progress
 
@@ -136,6 +137,12 @@ class Trainer(ABC):
     def total(self) -> int:
         return self.budget(self.cfg)
 
+    @property
+    def precision(self) -> str:
+        """The updates' precision, ``algo.precision`` (``"fp32"``, or ``"bf16"`` where the
+        trainer supports it: soft-Q and BC)."""
+        return resolve_precision(self.cfg.algo.get("precision"))
+
     # ------------------------------------------------------------------ to implement
 
     @abstractmethod
@@ -212,9 +219,10 @@ class Trainer(ABC):
         )
 
     def save_checkpoint(self) -> None:
-        self.run.save_checkpoint(self.state_dict())
-        self._last_checkpoint = time.monotonic()
-        self.write_status("running")
+        with timed("checkpoints"):
+            self.run.save_checkpoint(self.state_dict())
+            self._last_checkpoint = time.monotonic()
+            self.write_status("running")
 
     def checkpoint_due(self) -> bool:
         """Whether ``cfg.checkpoint_every_s`` seconds have passed since the last checkpoint."""
@@ -250,21 +258,23 @@ class Trainer(ABC):
 
     def periodic_evaluation(self) -> Score:
         """Scores the policy; keeps the best one; checkpoints the run."""
-        result = self.evaluate(self.policy)
+        with timed("evaluation"):
+            result = self.evaluate(self.policy)
         self._log({TRAIN_CURVE: result.return_mean, "eval/train_success": result.success_rate}, self.progress)
         self.last_evaluated = self.progress
         if self._selection_key(result.success_rate, result.return_mean) > self._selection_key(self.best_success, self.best_return):
             self.best_return, self.best_success, self.best_progress = result.return_mean, result.success_rate, self.progress
-            self.run.save_checkpoint(
-                {
-                    "progress": self.progress,
-                    "train_return": result.return_mean,
-                    "train_success": result.success_rate,
-                    "policy": self.policy.state_dict(),
-                },
-                best=True,
-                ignored=(self.budget_key,),  # a longer budget keeps the policy it already selected
-            )
+            with timed("checkpoints"):
+                self.run.save_checkpoint(
+                    {
+                        "progress": self.progress,
+                        "train_return": result.return_mean,
+                        "train_success": result.success_rate,
+                        "policy": self.policy.state_dict(),
+                    },
+                    best=True,
+                    ignored=(self.budget_key,),  # a longer budget keeps the policy it already selected
+                )
         self.save_checkpoint()
         log.info(
             "[%d %s] train-regime return %.1f, success %.0f%%", self.progress, self.unit, result.return_mean, 100 * result.success_rate
@@ -292,12 +302,15 @@ class Trainer(ABC):
         Raises:
             RunInterrupted: after checkpointing, on SIGINT or SIGTERM.
         """
-        self.setup()
-        resumed = self._resume()
+        with timed("setup"):
+            self.setup()
+            resumed = self._resume()
         self.logger = instantiate(self.cfg.logger)(log_dir=str(self.run.path))
         if resumed:
             log.info("resumed %s at %d %s", self.run.path, self.progress, self.unit)
-        identity = attempt_identity(source_checksum(self.cfg.demos.source, self.cfg.demos.path), self.cfg.compile, self.device)
+        identity = attempt_identity(
+            source_checksum(self.cfg.demos.source, self.cfg.demos.path), self.cfg.compile, self.device, precision=self.precision
+        )
         previous = self.run.record_attempt(identity, self.progress)
         changes = identity_changes(previous, identity) if resumed and previous is not None else {}
         if changes:

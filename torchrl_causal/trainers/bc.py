@@ -6,7 +6,10 @@ validation sets (``val_fraction`` of the episodes, 20% in the paper); an actor w
 Each epoch runs Adam on the Huber loss over shuffled minibatches of ``batch_size`` (2048:
 large batches); training stops after ``patience`` epochs without a better validation loss
 or after ``epochs`` epochs. BC never acts during training; the base class still evaluates it in
-the train regime every ``eval_every`` epochs and keeps the best checkpoint.
+the train regime every ``eval_every`` epochs and keeps the best checkpoint. With
+``algo.precision=bf16`` the training minibatches' forward runs under a bf16 autocast
+(:func:`~torchrl_causal.experiment.device.matmul_precision`); the validation loss that
+early stopping reads stays fp32.
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.experiment.builders import expert_transitions, load_or_collect_demonstrations, make_imitator_env, make_policy
+from torchrl_causal.experiment.device import matmul_precision
+from torchrl_causal.experiment.timing import timed
 from torchrl_causal.modules import fit_standardizers
 from torchrl_causal.trainers.base import Trainer
 
@@ -93,13 +98,16 @@ class BCTrainer(Trainer):
 
     def train_step(self) -> Mapping[str, float | torch.Tensor]:
         losses = []
-        for batch in self._batches(self.train_data, True):
-            loss = self.loss(batch)["loss_bc"]
-            self.optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            self.optimizer.step()
-            losses.append(loss.detach())
-        val = self.validation_loss()
+        with timed("updates"):
+            for batch in self._batches(self.train_data, True):
+                with matmul_precision(self.precision, self.device):
+                    loss = self.loss(batch)["loss_bc"]
+                self.optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                self.optimizer.step()
+                losses.append(loss.detach())
+        with timed("evaluation"):
+            val = self.validation_loss()
         if val < self.best_val_loss:
             self.best_val_loss, self.epochs_without_improvement = val, 0
         else:

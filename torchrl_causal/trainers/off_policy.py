@@ -68,8 +68,9 @@ from torchrl.data import LazyMemmapStorage, LazyTensorStorage, TensorDictReplayB
 
 from torchrl_causal.errors import InvalidStateError, InvalidValueError
 from torchrl_causal.experiment.builders import TRANSITION_KEYS, instantiate_with_strings, make_imitator_env, make_policy, observation_dim
-from torchrl_causal.experiment.device import CPU
+from torchrl_causal.experiment.device import CPU, matmul_precision
 from torchrl_causal.experiment.run_directory import CheckpointError
+from torchrl_causal.experiment.timing import timed
 from torchrl_causal.objectives import ExpertFlaggedSACLoss, add_absorbing_transitions, eval_mode
 from torchrl_causal.trainers.base import Trainer
 from torchrl_causal.trainers.collection import ResumableCollector
@@ -149,6 +150,7 @@ class OffPolicyILTrainer(Trainer):
             critic_scheduler=None if algo.critic_scheduler is None else instantiate(algo.critic_scheduler),
             cosine_updates=cosine_updates,
             compile=self.cfg.compile,
+            precision=self.precision,
         )
         expert_batch = round(algo.batch_size * algo.expert_ratio)
         if not 1 <= expert_batch < algo.batch_size:
@@ -239,7 +241,9 @@ class OffPolicyILTrainer(Trainer):
         updates = self._required_warm_start().bc_updates
         optimizer = instantiate(self.cfg.algo.actor_optimizer)(list(self.loss.actor_network_params.flatten_keys().values()))
         for step in range(1, updates + 1):
-            nll = self.loss.behaviour_cloning_nll(self.expert_buffer.sample())
+            batch = self.expert_buffer.sample()
+            with matmul_precision(self.precision, self.device):
+                nll = self.loss.behaviour_cloning_nll(batch)
             optimizer.zero_grad(set_to_none=True)
             nll.backward()
             torch.nn.utils.clip_grad_norm_(optimizer.param_groups[0]["params"], self.cfg.algo.max_grad_norm)
@@ -258,11 +262,12 @@ class OffPolicyILTrainer(Trainer):
 
     def sample_batch(self) -> TensorDictBase:
         """An update's batch: the expert half, then the policy half."""
-        return torch.cat([self.expert_buffer.sample(), self.policy_buffer.sample()], dim=0)
+        with timed("replay sampling"):
+            return torch.cat([self.expert_buffer.sample(), self.policy_buffer.sample()], dim=0)
 
     def _collect(self) -> TensorDictBase:
         """One collector batch of the current policy, stored in the policy buffer."""
-        with eval_mode(self.policy):
+        with timed("collection"), eval_mode(self.policy):
             if self.collector is None:
                 self.collector = self._make_collector()
                 self.batches = iter(self.collector)
@@ -286,7 +291,8 @@ class OffPolicyILTrainer(Trainer):
         # A fresh run's warm start: progress and the update count say whether each part ran,
         # so a run resumed from a checkpoint never repeats one.
         if self.warm_start and self.progress == 0 and self.warm_start.bc_updates:
-            self.clone_expert_actions()
+            with timed("warm start (BC)"):
+                self.clone_expert_actions()
         if self.refill_target:
             self.refill_policy_buffer()
         transitions = self._collect()
@@ -295,10 +301,12 @@ class OffPolicyILTrainer(Trainer):
         self.batches_since_log += 1
         owed = self.updates_due(self.progress) - self.update.updates
         if owed > 0 and self.update.updates == 0 and self.warm_start and self.warm_start.critic_updates:
-            self.fit_critics()
-        for _ in range(owed):
-            self.scalar_sums[1:] += self.update(self.sample_batch())
-            self.updates_since_log += 1
+            with timed("warm start (critics)"):
+                self.fit_critics()
+        with timed("updates"):
+            for _ in range(owed):
+                self.scalar_sums[1:] += self.update(self.sample_batch())
+                self.updates_since_log += 1
         due = self.updates_since_log >= self.log_every or self.update.updates == 0 or self.progress >= self.total
         return self._scalar_means() if due else {}
 

@@ -14,18 +14,22 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Callable, Iterable, Mapping
-from typing import Any, cast
+from typing import Any, TypeVar, cast
 
 import torch
 from tensordict import TensorDictBase
 from torchrl.objectives import SACLoss, TargetNetUpdater
 
 from torchrl_causal.errors import InvalidValueError
+from torchrl_causal.experiment.device import matmul_precision, resolve_precision
+from torchrl_causal.experiment.timing import timed
 
 __all__ = ["ActorCriticUpdate", "OptimizerFactory"]
 
 #: Builds an optimiser from the parameters it updates (e.g. ``partial(torch.optim.Adam, lr=3e-4)``).
 OptimizerFactory = Callable[[Iterable[torch.Tensor]], torch.optim.Optimizer]
+
+_Forward = TypeVar("_Forward", bound=Callable[..., Any])
 
 
 def _build_optimizer(factory: OptimizerFactory, params: list[torch.Tensor]) -> torch.optim.Optimizer:
@@ -48,11 +52,19 @@ class ActorCriticUpdate:
     loss's device, for the caller to average on the device and log every so often.
 
     ``compile=True`` runs the loss forward through :func:`torch.compile` (the backward
-    then runs the compiled backward graph); the optimiser steps stay eager so the
-    scheduled learning rate never triggers a recompilation. Inductor is told to keep
-    eager's random-number stream (``fallback_random``), so a compiled run draws the same
-    dropout masks and action samples as an eager one and gives the same numbers. Shapes
-    are static (``dynamic=False``): a batch of another size compiles a graph of its own.
+    then runs the compiled backward graph), for the joint update and for the critic-only
+    :meth:`critic_step` alike (a graph each, compiled at its first call); the optimiser
+    steps stay eager so the scheduled learning rate never triggers a recompilation.
+    Inductor is told to keep eager's random-number stream (``fallback_random``), so a
+    compiled run draws the same dropout masks and action samples as an eager one and gives
+    the same numbers. Shapes are static (``dynamic=False``): a batch of another size
+    compiles a graph of its own. A first compiled call is timed as the run's ``compile``
+    part (:func:`~torchrl_causal.experiment.timing.timed`).
+
+    ``precision="bf16"`` runs the loss forward (and so its backward) under a bf16
+    autocast (:func:`~torchrl_causal.experiment.device.matmul_precision`): the matmuls in
+    bf16, the parameters, their gradients, the optimiser state and the losses' reductions
+    in fp32.
 
     Args:
         loss: a :class:`~torchrl.objectives.SACLoss` (or subclass) whose networks are
@@ -76,6 +88,7 @@ class ActorCriticUpdate:
         compile (bool): compile the loss forward. Defaults to ``False``.
         compile_options (dict, optional): extra keyword arguments for
             :func:`torch.compile` (``backend``, ``mode``, ...).
+        precision (str): ``"fp32"`` (default) or ``"bf16"`` (see above).
 
     Examples:
         >>> from functools import partial
@@ -119,6 +132,7 @@ class ActorCriticUpdate:
         cosine_updates: int | None = None,
         compile: bool = False,
         compile_options: Mapping[str, Any] | None = None,
+        precision: str = "fp32",
     ) -> None:
         self.loss = loss
         self.max_grad_norm = float(max_grad_norm)
@@ -133,6 +147,9 @@ class ActorCriticUpdate:
         self.cosine_updates = cosine_updates
         self.critic_schedule = None if critic_scheduler is None else critic_scheduler(self.critic_optimizer, T_max=cosine_updates)
         self.updates = 0
+        self.precision = resolve_precision(precision)
+        self.device = loss.log_alpha.device
+        self.compile_options: dict[str, Any] | None = None
         if compile:
             # Static shapes: a training run feeds one batch size, and a second compiled update
             # of other network sizes in the same process would otherwise turn on automatic
@@ -140,9 +157,24 @@ class ActorCriticUpdate:
             options = {"dynamic": False, **(compile_options or {})}
             if options.get("backend", "inductor") == "inductor":
                 options["options"] = {"fallback_random": True, **options.get("options", {})}
-            self._forward = torch.compile(self.losses, **options)
-        else:
-            self._forward = self.losses
+            self.compile_options = options
+        self._forward = self._compiled(self.losses)
+        self._critic_forward = self._compiled(self.critic_loss)
+        self._compiled_calls: set[str] = set()
+
+    def _compiled(self, forward: _Forward) -> _Forward:
+        """``forward`` through :func:`torch.compile` with this update's options, or itself (eager)."""
+        if self.compile_options is None:
+            return forward
+        return cast(_Forward, torch.compile(forward, **self.compile_options))
+
+    def _timed_part(self, name: str) -> Any:
+        """``timed("compile")`` around the first call of the compiled ``name`` (forward and
+        backward: where the graphs are built), else nothing."""
+        if self.compile_options is None or name in self._compiled_calls:
+            return timed(None)
+        self._compiled_calls.add(name)
+        return timed("compile")
 
     @property
     def optimizers(self) -> tuple[torch.optim.Optimizer, ...]:
@@ -151,17 +183,19 @@ class ActorCriticUpdate:
     def losses(self, batch: TensorDictBase) -> tuple[torch.Tensor, torch.Tensor]:
         # Plain tensors out, no TensorDict: a compiled graph that returns one is rebuilt
         # after the graph, which costs more tracing time than the loss itself.
-        out = self.loss(batch)
+        with matmul_precision(self.precision, self.device):
+            out = self.loss(batch)
         # Every "loss_*" entry (TorchRL's convention): SAC's three and the optional "loss_bc".
         total = sum(value for key, value in out.items() if key.startswith("loss_"))
         return total, torch.stack([out[key].detach() for key in self.SCALARS])
 
     def __call__(self, batch: TensorDictBase) -> torch.Tensor:
         """One update on ``batch``; returns :attr:`SCALARS` stacked, on the loss's device."""
-        total, scalars = self._forward(batch)
-        for optimizer in self.optimizers:
-            optimizer.zero_grad(set_to_none=True)
-        total.backward()
+        with self._timed_part("update"):
+            total, scalars = self._forward(batch)
+            for optimizer in self.optimizers:
+                optimizer.zero_grad(set_to_none=True)
+            total.backward()
         torch.nn.utils.clip_grad_norm_(self.critic_params, self.max_grad_norm)
         torch.nn.utils.clip_grad_norm_(self.actor_params, self.max_grad_norm)
         for optimizer in self.optimizers:
@@ -173,14 +207,22 @@ class ActorCriticUpdate:
         self.updates += 1
         return scalars
 
+    def critic_loss(self, batch: TensorDictBase) -> torch.Tensor:
+        """The loss's critic term on ``batch`` (the whole loss runs: its draws are the joint
+        update's), in this update's precision."""
+        with matmul_precision(self.precision, self.device):
+            return self.loss(batch)["loss_qvalue"]
+
     def critic_step(self, batch: TensorDictBase) -> torch.Tensor:
         """One update of the critics alone (clipped, then the target update), the actor and
         alpha left as they are; returns the critic loss, detached. Used to fit the critics to
         a warm-started actor before the two learn together; it neither counts in
-        :attr:`updates` nor steps the learning-rate schedule. Runs eagerly."""
-        loss_qvalue = self.loss(batch)["loss_qvalue"]
-        self.critic_optimizer.zero_grad(set_to_none=True)
-        loss_qvalue.backward()
+        :attr:`updates` nor steps the learning-rate schedule. Compiled (a graph of its own)
+        when the update is."""
+        with self._timed_part("critic"):
+            loss_qvalue = self._critic_forward(batch)
+            self.critic_optimizer.zero_grad(set_to_none=True)
+            loss_qvalue.backward()
         torch.nn.utils.clip_grad_norm_(self.critic_params, self.max_grad_norm)
         self.critic_optimizer.step()
         for optimizer in (self.actor_optimizer, self.alpha_optimizer):
