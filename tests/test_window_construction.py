@@ -130,3 +130,24 @@ def test_from_env_refuses_a_window_as_long_as_the_horizon():
         assert isinstance(caught.value, TorchRLCausalError) and time.process_time() - start < 1.0
         assert "\n" not in str(caught.value)
     assert CausalWindowTransform.from_env(env, 19).window.k == 19
+
+
+# ---------------------------------------------------------------------- sizes refused before allocating
+@pytest.mark.parametrize("batch_size", [2.0, -1, "4", (2, 2.5), True])
+def test_env_batch_sizes_are_validated(batch_size):
+    from torchrl_causal.envs.base import EnvArgumentError
+
+    with pytest.raises(EnvArgumentError, match="batch_size must be an int >= 0") as caught:
+        RoverMazeEnv(batch_size=batch_size)
+    assert isinstance(caught.value, TorchRLCausalError) and "\n" not in str(caught.value)
+
+
+def test_mujoco_batch_beyond_memory_is_refused_before_allocating():
+    import resource
+
+    from torchrl_causal.envs.base import EnvArgumentError
+
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with pytest.raises(EnvArgumentError, match=r"batch size 200000 needs 200000 MuJoCo simulations"):
+        AntMazeEnv(batch_size=200_000)
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 200_000  # KiB: nothing of the batch allocated
