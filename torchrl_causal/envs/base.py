@@ -229,6 +229,33 @@ def _validate_strength(confounding_strength: float) -> float:
     return strength
 
 
+class EnvArgumentError(TorchRLCausalError, ValueError):
+    """An env constructor's argument out of range, named with its value (raised before the
+    env allocates anything)."""
+
+
+def validate_batch_size(batch_size: object) -> tuple[int, ...]:
+    """``batch_size`` as a shape: an int >= 0 or a sequence of them (``()`` for an unbatched env).
+
+    Raises:
+        EnvArgumentError: anything else (a float, a negative size, a string), named.
+
+    Examples:
+        >>> validate_batch_size(4), validate_batch_size((2, 3)), validate_batch_size(torch.Size([]))
+        ((4,), (2, 3), ())
+        >>> validate_batch_size(2.0)
+        Traceback (most recent call last):
+        ...
+        torchrl_causal.envs.base.EnvArgumentError: batch_size must be an int >= 0 or a sequence of them, got 2.0
+    """
+    dims = (batch_size,) if isinstance(batch_size, int) and not isinstance(batch_size, bool) else batch_size
+    if isinstance(dims, (str, bytes)) or not isinstance(dims, Sequence):
+        raise EnvArgumentError(f"batch_size must be an int >= 0 or a sequence of them, got {batch_size!r}")
+    if not all(isinstance(d, int) and not isinstance(d, bool) and d >= 0 for d in dims):
+        raise EnvArgumentError(f"batch_size must be an int >= 0 or a sequence of them, got {batch_size!r}")
+    return tuple(int(d) for d in dims)
+
+
 def _validate_horizon(horizon: int) -> int:
     if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
         raise InvalidValueError(f"horizon must be a positive int, got {horizon!r}")
@@ -279,8 +306,7 @@ class ConfoundedEnv(EnvBase):
         device: torch.device | str | None = None,
         seed: int | None = None,
     ) -> None:
-        if isinstance(batch_size, int):
-            batch_size = (batch_size,)
+        batch_size = validate_batch_size(batch_size)
         device = torch.device("cpu" if device is None else device)
         super().__init__(device=device, batch_size=torch.Size(batch_size))
         self._regime = _validate_regime(regime)

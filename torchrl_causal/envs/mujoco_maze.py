@@ -30,7 +30,8 @@ from gymnasium_robotics.envs.maze.maze_v4 import Maze
 from tensordict.utils import NestedKey
 from torchrl.data import Bounded, TensorSpec, Unbounded
 
-from torchrl_causal.envs.base import GustConfoundedEnv, Regime
+from torchrl_causal.available import available_memory
+from torchrl_causal.envs.base import EnvArgumentError, GustConfoundedEnv, Regime, validate_batch_size
 from torchrl_causal.envs.maze_layout import MAZE_MAPS, MazeLayout
 from torchrl_causal.errors import InvalidStateError, InvalidValueError
 
@@ -164,10 +165,18 @@ class BatchedSimulation:
     """
 
     def __init__(self, model: mujoco.MjModel, *, num_envs: int, frame_skip: int, pushed_body: str = "torso") -> None:
-        if num_envs < 1:
-            raise InvalidValueError(f"num_envs must be >= 1, got {num_envs}")
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+            raise EnvArgumentError(f"num_envs must be an int >= 1, got {num_envs!r}")
         if frame_skip < 1:
             raise InvalidValueError(f"frame_skip must be >= 1, got {frame_skip}")
+        # Each MjData reserves its buffer and its arena (contacts, constraints, solver
+        # scratch); past what the machine has, MuJoCo's own allocation fails mid-way.
+        need, available = num_envs * (model.nbuffer + model.narena), available_memory()
+        if need > available:
+            raise EnvArgumentError(
+                f"batch size {num_envs} needs {num_envs} MuJoCo simulations of {(model.nbuffer + model.narena) / 2**20:.1f} MB "
+                f"each ({need / 2**30:.1f} GB) and {available / 2**30:.1f} GB are available: use a smaller batch_size"
+            )
         self.frame_skip = frame_skip
         self.model = model
         self.datas = [mujoco.MjData(model) for _ in range(num_envs)]
@@ -380,7 +389,7 @@ class MujocoMazeEnv(GustConfoundedEnv):
         self.success_radius = float(self.default_success_radius if success_radius is None else success_radius)
         if not self.success_radius > 0:
             raise InvalidValueError(f"success_radius must be > 0, got {success_radius!r}")
-        shape = (batch_size,) if isinstance(batch_size, int) else tuple(batch_size)
+        shape = validate_batch_size(batch_size)
         self.simulator = MazeSimulator(
             self.agent_xml,
             self.task,

@@ -335,7 +335,7 @@ def iqm_with_interval(values: Sequence[float], digits: int = 1) -> str:
 
     Examples:
         >>> iqm_with_interval([80.0, 90.0, 100.0])
-        '90.0 [82.2, 97.8]'
+        '90.0 [80.0, 100.0]'
         >>> iqm_with_interval([95.0])
         '95.0'
     """

@@ -27,6 +27,7 @@ Examples:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import shutil
@@ -37,6 +38,7 @@ import torch  # noqa: F401  (the docstring examples use it)
 from omegaconf import DictConfig, OmegaConf
 from torchrl.data import Composite, TensorSpec
 
+from torchrl_causal.available import available_memory
 from torchrl_causal.experiment.builders import make_env, make_imitator_env, make_window
 from torchrl_causal.experiment.schema import ConfigValueError, GAILConfig, OffPolicyConfig, algo_schema_of
 
@@ -47,6 +49,7 @@ __all__ = [
     "available_memory",
     "check_footprint",
     "check_run_fits",
+    "disk_size",
     "encoded_transition_bytes",
     "free_disk",
     "measured_transition_bytes",
@@ -70,6 +73,9 @@ class Footprint:
 
     ram: dict[str, int]
     disk: dict[str, int]
+    #: files created at their full size but written only as they fill (the replay buffer's
+    #: memory maps): they need no free disk up front, but cannot outgrow the file system
+    reserved: dict[str, int] = dataclasses.field(default_factory=dict)
 
     @property
     def ram_bytes(self) -> int:
@@ -158,48 +164,28 @@ def run_footprint(cfg: DictConfig) -> Footprint:
     if issubclass(schema, OffPolicyConfig):
         ram["collector batches (algo.frames_per_batch x window.k)"] = 2 * algo.frames_per_batch * step
         disk["policy replay buffer (algo.buffer_size x window.k)"] = min(algo.buffer_size, algo.total_steps) * step
+        reserved = {f"policy replay buffer files (algo.buffer_size={algo.buffer_size} x window.k)": algo.buffer_size * step}
+        return Footprint(ram=ram, disk=disk, reserved=reserved)
     elif schema is GAILConfig:
         ram["GAIL rollouts (algo.episodes_per_round x env.horizon x window.k)"] = 2 * algo.episodes_per_round * cfg.env.horizon * step
     return Footprint(ram=ram, disk=disk)
 
 
-def _meminfo_available() -> int | None:
-    try:
-        with open("/proc/meminfo") as handle:
-            for line in handle:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return None
+def _existing_folder(path: str | os.PathLike) -> Path:
+    folder = Path(path).absolute()
+    while not folder.exists():
+        folder = folder.parent
+    return folder
 
 
-def _cgroup_available() -> int | None:
-    """What the cgroup (v2) this process runs in still allows, when it sets a limit."""
-    try:
-        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
-        if limit == "max":
-            return None
-        return int(limit) - int(Path("/sys/fs/cgroup/memory.current").read_text())
-    except (OSError, ValueError):
-        return None
-
-
-def available_memory() -> int:
-    """Bytes this process can still allocate without swapping: the kernel's
-    ``MemAvailable``, lowered to the cgroup's remaining limit when there is one."""
-    candidates = [value for value in (_meminfo_available(), _cgroup_available()) if value is not None]
-    if not candidates:
-        candidates = [os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")]
-    return max(0, min(candidates))
+def disk_size(path: str | os.PathLike) -> int:
+    """Total bytes of the file system that will hold ``path``."""
+    return shutil.disk_usage(_existing_folder(path)).total
 
 
 def free_disk(path: str | os.PathLike) -> int:
     """Free bytes on the file system that will hold ``path`` (its first existing folder)."""
-    folder = Path(path).absolute()
-    while not folder.exists():
-        folder = folder.parent
-    return shutil.disk_usage(folder).free
+    return shutil.disk_usage(_existing_folder(path)).free
 
 
 def _size(count: int) -> str:
@@ -211,8 +197,9 @@ def _largest(items: dict[str, int], count: int = 3) -> str:
     return ", ".join(f"{name} {_size(value)}" for name, value in biggest)
 
 
-def check_footprint(footprint: Footprint, *, available_ram: int, free_disk: int) -> None:
-    """Refuses a run whose estimated memory or disk exceeds what is available.
+def check_footprint(footprint: Footprint, *, available_ram: int, free_disk: int, disk_size: int | None = None) -> None:
+    """Refuses a run whose estimated memory or disk exceeds what is available, or whose
+    reserved files exceed the whole file system (``disk_size``, when given).
 
     Raises:
         ConfigValueError: naming the estimate, its largest items (and the keys that set
@@ -223,6 +210,12 @@ def check_footprint(footprint: Footprint, *, available_ram: int, free_disk: int)
             f"this run needs an estimated {_size(footprint.ram_bytes)} of memory ({_largest(footprint.ram)}) "
             f"and {_size(available_ram)} are available: lower the keys named (a smaller window.k, fewer "
             "demos.episodes or envs), or raise max_memory_gb if this machine has more to give"
+        )
+    reserved = sum(footprint.reserved.values())
+    if disk_size is not None and reserved > disk_size:
+        raise ConfigValueError(
+            f"this run would create files of {_size(reserved)} ({_largest(footprint.reserved)}) on a file system of "
+            f"{_size(disk_size)}: the buffer never holds more than algo.total_steps transitions, so lower algo.buffer_size"
         )
     if footprint.disk_bytes > free_disk:
         raise ConfigValueError(
@@ -238,5 +231,5 @@ def check_run_fits(cfg: DictConfig) -> Footprint:
     footprint = run_footprint(cfg)
     limit = OmegaConf.select(cfg, "max_memory_gb")
     ram = available_memory() if limit is None else int(float(limit) * GB)
-    check_footprint(footprint, available_ram=ram, free_disk=free_disk(cfg.run_dir))
+    check_footprint(footprint, available_ram=ram, free_disk=free_disk(cfg.run_dir), disk_size=disk_size(cfg.run_dir))
     return footprint

@@ -16,7 +16,7 @@ from .adjustment import (
 )
 from .criteria import BackdoorReport, ExactAdjustment, find_adjustment, find_ox, sequential_pi_backdoor
 from .diagram import CausalDiagram, Confounder
-from .errors import BoundedInfluenceError, GraphError, NotImitableError, WindowConstructionError
+from .errors import BoundedInfluenceError, GraphError, NotImitableError, WindowConstructionError, WindowSizeError
 from .template import REWARD, TimeSliceTemplate
 from .window import AdjustmentWindow
 
@@ -33,6 +33,7 @@ __all__ = [
     "NotImitableError",
     "TimeSliceTemplate",
     "WindowConstructionError",
+    "WindowSizeError",
     "check_bounded_influence",
     "exact_adjustment",
     "find_adjustment",

@@ -34,7 +34,7 @@ from functools import lru_cache
 from itertools import combinations
 from typing import Literal, cast
 
-from .criteria import BackdoorReport, ExactAdjustment, find_adjustment, sequential_pi_backdoor
+from .criteria import BackdoorReport, ExactAdjustment, find_adjustment, sequential_pi_backdoor, sequential_pi_backdoor_by_rule
 from .diagram import CausalDiagram
 from .errors import BoundedInfluenceError, GraphError, NotImitableError, WindowConstructionError
 from .indexed import UnionFind
@@ -335,7 +335,98 @@ def _window(template: TimeSliceTemplate, variables: Iterable[str], k: int, exact
     )
 
 
-def _window_failures(template: TimeSliceTemplate, window: AdjustmentWindow, stop_at_first: bool) -> list[tuple[int, BackdoorReport]]:
+class _WindowRule:
+    """A window's family on ``template.unroll(horizon)`` as a
+    :class:`~torchrl_causal.graphs.criteria.SetRule`: ``(v, s)`` is in the set of ``X_t``
+    iff ``t - s`` is one of ``v``'s lags. Every answer costs the lags it returns (or O(1)),
+    and the ancestors of the reward take one pass over the diagram."""
+
+    def __init__(self, template: TimeSliceTemplate, window: AdjustmentWindow, diagram: CausalDiagram, horizon: int) -> None:
+        unobserved = [v for v in window.lags if v not in template.observed]
+        if unobserved or window.action != template.action:
+            raise GraphError(f"the window's variables {unobserved} are not observed, or its action is not {template.action!r}")
+        self.window = window
+        self.g = diagram.indexed
+        self.action = template.action
+        self.horizon = horizon
+        self.lag_sets = {v: frozenset(lags) for v, lags in window.lags.items()}
+        self.runs = {v: _runs(lags) for v, lags in window.lags.items()}
+
+    def _time(self, node: int) -> tuple[str, int] | None:
+        name = self.g.nodes[node]
+        return None if name == REWARD else cast("tuple[str, int]", name)
+
+    def holds(self, action: int, node: int) -> bool:
+        named = self._time(node)
+        if named is None:
+            return False
+        lags = self.lag_sets.get(named[0])
+        return lags is not None and self.g.nodes[action][1] - named[1] in lags  # type: ignore[index]
+
+    def members(self, action: int) -> list[int]:
+        # built as sequential_pi_backdoor builds it from the listed family (_adjustment_ids),
+        # so that a search reading this action's parents meets them in the same order
+        index = self.g.index
+        return list(set(map(index.__getitem__, self.window.adjustment_set(self.g.nodes[action][1]))))  # type: ignore[index]
+
+    def holders(self, node: int, after: int) -> list[int]:
+        named = self._time(node)
+        if named is None or named[0] not in self.lag_sets:
+            return []
+        var, s = named
+        first = self.g.nodes[after][1] + 1 if after >= 0 else 0  # type: ignore[index]
+        index, held = self.g.index, []
+        for low, high in reversed(self.runs[var]):  # latest first: runs and times descending
+            held.extend(index[self.action, t] for t in range(min(s + high, self.horizon - 1), max(s + low, first) - 1, -1))
+        return held
+
+    def policy_ancestors(self, reward: int) -> set[int]:
+        # Reverse topological order (the unrolled order: by time, the action last in its
+        # slice): when (v, s) is reached, every action at s or later is decided, and
+        # later[j] counts the ancestor actions at times >= j, so "some X_j with j - s among
+        # v's lags is an ancestor" costs one subtraction per run of consecutive lags.
+        g, horizon = self.g, self.horizon
+        actions = {self.g.index[self.action, t] for t in range(horizon)}
+        later = [0] * (horizon + 2)
+        found = {reward}
+        for v in reversed(g.order):
+            if v == reward:
+                continue
+            var, s = g.nodes[v]  # type: ignore[misc]
+            ancestor = any(c in found for c in g.children[v] if c not in actions)
+            if not ancestor and var in self.runs:
+                for low, high in self.runs[var]:
+                    a, b = s + low, min(s + high, horizon - 1)
+                    if a <= b and later[a] - later[b + 1] > 0:
+                        ancestor = True
+                        break
+            if ancestor:
+                found.add(v)
+            if var == self.action:
+                later[s] = later[s + 1] + (v in found)
+        return found
+
+
+def _runs(lags: Iterable[int]) -> list[tuple[int, int]]:
+    """Ascending lags as maximal runs of consecutive ones, ``(first, last)``."""
+    runs: list[tuple[int, int]] = []
+    for lag in lags:
+        if runs and runs[-1][1] == lag - 1:
+            runs[-1] = (runs[-1][0], lag)
+        else:
+            runs.append((lag, lag))
+    return runs
+
+
+#: How :func:`windowed_adjustment` checks a window's family against Definition 2: ``"rule"``
+#: through the window's rule (linear in ``k``), ``"listed"`` with every set listed (the
+#: reference it agrees with, ``O(k^2)`` in time and memory).
+Verification = Literal["rule", "listed"]
+
+
+def _window_failures(
+    template: TimeSliceTemplate, window: AdjustmentWindow, stop_at_first: bool, verification: Verification = "rule"
+) -> list[tuple[int, BackdoorReport]]:
     """The verification horizons at which the window's family fails Definition 2, with the
     report there (the first ``k`` actions only, except at the longest horizon)."""
     action, k = template.action, window.k
@@ -343,13 +434,14 @@ def _window_failures(template: TimeSliceTemplate, window: AdjustmentWindow, stop
     failures = []
     for horizon in horizons:
         actions = [(action, t) for t in range(horizon)]
-        report = sequential_pi_backdoor(
-            template.unroll(horizon),
-            actions,
-            REWARD,
-            {(action, t): window.adjustment_set(t) for t in range(horizon)},
-            check=None if horizon == horizons[-1] else actions[:k],
-        )
+        check = None if horizon == horizons[-1] else actions[:k]
+        diagram = template.unroll(horizon)
+        if verification == "listed":
+            family = {(action, t): window.adjustment_set(t) for t in range(horizon)}
+            report = sequential_pi_backdoor(diagram, actions, REWARD, family, check=check)
+        else:
+            rule = _WindowRule(template, window, diagram, horizon)
+            report = sequential_pi_backdoor_by_rule(diagram, actions, REWARD, rule, check=check)
         if not report.holds:
             failures.append((horizon, report))
             if stop_at_first:
@@ -357,10 +449,10 @@ def _window_failures(template: TimeSliceTemplate, window: AdjustmentWindow, stop
     return failures
 
 
-def _relaxed_window(template: TimeSliceTemplate, k: int) -> AdjustmentWindow:
+def _relaxed_window(template: TimeSliceTemplate, k: int, verification: Verification) -> AdjustmentWindow:
     window = _window(template, template.reward_ancestors() & set(template.observed), k, exact=False)
     witnesses: dict[tuple[Node, ...], None] = {}
-    for _, report in _window_failures(template, window, stop_at_first=False):
+    for _, report in _window_failures(template, window, stop_at_first=False, verification=verification):
         witnesses.update(dict.fromkeys(report.witnesses.values()))
     return replace(window, witnesses=tuple(witnesses))
 
@@ -385,7 +477,9 @@ def _searched_windows(template: TimeSliceTemplate, k: int, tried: AdjustmentWind
             yield window
 
 
-def windowed_adjustment(template: TimeSliceTemplate, k: int, mode: Literal["exact", "relaxed"] = "exact") -> AdjustmentWindow:
+def windowed_adjustment(
+    template: TimeSliceTemplate, k: int, mode: Literal["exact", "relaxed"] = "exact", *, verification: Verification = "rule"
+) -> AdjustmentWindow:
     """The paper's Algorithm 1: a fixed window of ``k`` past steps to condition on.
 
     ``mode="exact"`` runs FindOX on the horizon-``(k+1)`` proxy, builds the Markov
@@ -407,6 +501,13 @@ def windowed_adjustment(template: TimeSliceTemplate, k: int, mode: Literal["exac
 
     Both modes list in ``lags_beyond_k`` the template edges the window cannot reach.
 
+    Cost: linear in ``k`` (``results/window_construction.md``). The family of a window
+    lists ``O(k)`` nodes for each of the ``O(k)`` actions of a verification horizon, so the
+    checks read it through its rule (``verification="rule"``) instead of listing it;
+    ``verification="listed"`` lists every set, as the construction did before, and gives the
+    same window in ``O(k^2)`` time and memory (``tests/test_window_construction.py``
+    compares the two).
+
     Examples:
         >>> from torchrl_causal.envs.templates import ANTMAZE_TEMPLATE
         >>> w = windowed_adjustment(ANTMAZE_TEMPLATE, 2, mode="relaxed")
@@ -416,8 +517,10 @@ def windowed_adjustment(template: TimeSliceTemplate, k: int, mode: Literal["exac
         (('X', 0), ('O', 0), ('L', 0), 'Y')
     """
     k = _check_k(k)
+    if verification not in ("rule", "listed"):
+        raise GraphError(f"verification must be 'rule' or 'listed', got {verification!r}")
     if mode == "relaxed":
-        return _relaxed_window(template, k)
+        return _relaxed_window(template, k, verification)
     if mode != "exact":
         raise GraphError(f"mode must be 'exact' or 'relaxed', got {mode!r}")
     try:
@@ -433,15 +536,20 @@ def windowed_adjustment(template: TimeSliceTemplate, k: int, mode: Literal["exac
             chain=influence.chain,
         )
     # The nodes of an unrolled template other than the reward are (variable, time) pairs.
-    chosen = {v for x in proxy.actions for v, _ in cast("frozenset[tuple[str, int]]", proxy.adjustment_set(x))}
+    if verification == "listed":
+        chosen = {v for x in proxy.actions for v, _ in cast("frozenset[tuple[str, int]]", proxy.adjustment_set(x))}
+    else:
+        # The sets are nested prefixes of one order, so their union is the longest one.
+        longest = max((proxy.set_size(x) for x in proxy.actions), default=0)
+        chosen = {v for v, _ in cast("tuple[tuple[str, int], ...]", proxy.conditioning_order[:longest])}
     built = _window(template, chosen, k, exact=True)
-    failures = _window_failures(template, built, stop_at_first=True)
+    failures = _window_failures(template, built, stop_at_first=True, verification=verification)
     if not failures:
         return built
     tried = 1
     for window in _searched_windows(template, k, built):
         tried += 1
-        if not _window_failures(template, window, stop_at_first=True):
+        if not _window_failures(template, window, stop_at_first=True, verification=verification):
             return window
     horizon, report = failures[0]
     witness = next(iter(report.witnesses.values()))

@@ -12,7 +12,7 @@ from bisect import bisect_left
 from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import cast
+from typing import Protocol, cast
 
 from .diagram import CausalDiagram
 from .errors import GraphError, NotImitableError
@@ -20,7 +20,15 @@ from .indexed import UnionFind, find_open_path, reach
 
 Node = Hashable
 
-__all__ = ["BackdoorReport", "ExactAdjustment", "find_adjustment", "find_ox", "sequential_pi_backdoor"]
+__all__ = [
+    "BackdoorReport",
+    "ExactAdjustment",
+    "SetRule",
+    "find_adjustment",
+    "find_ox",
+    "sequential_pi_backdoor",
+    "sequential_pi_backdoor_by_rule",
+]
 
 
 @dataclass(frozen=True)
@@ -113,19 +121,20 @@ class _ManipulatedGraph:
     def __init__(self, diagram: CausalDiagram, sets: Mapping[int, set[int]], reward: int) -> None:
         g = diagram.indexed
         self.rank = g.rank
+        self.sets = sets
         self.pa = [list(p) for p in g.parents]
         self.ch = [list(c) for c in g.children]
         self.sp = [list(s) for s in g.siblings]
         policy_parents = [sets[v] if v in sets else p for v, p in enumerate(g.parents)]
         self.causes_reward = {reward} | reach(policy_parents, [reward])
 
-    def make_future(self, action: int, adjustment: Iterable[int]) -> None:
+    def make_future(self, action: int) -> None:
         pa, ch, sp = self.pa, self.ch, self.sp
         for p in pa[action]:
             ch[p].remove(action)
         for s in sp[action]:
             sp[s].remove(action)
-        pa[action] = list(adjustment)
+        pa[action] = list(self.sets[action])
         sp[action] = []
         for z in pa[action]:
             ch[z].append(action)
@@ -134,37 +143,149 @@ class _ManipulatedGraph:
         """``v ∈ An(z)``, searched lazily: open colliders are few, and ``An(z)`` of a window
         reaches back to the start of the episode. A directed path into ``z`` only visits
         nodes before ``x``, where ``G'_t`` is the original graph."""
-        rank, ch, limit = self.rank, self.ch, self.rank[x]
-        known: dict[int, bool] = {}
+        return _ancestor_test(self.rank, self.ch, x, z.__contains__)
 
-        def test(v: int) -> bool:
-            if v in z:
-                return True
-            if rank[v] >= limit:
-                return False
-            if v in known:
-                return known[v]
-            seen = {v}
-            stack = [v]
-            while stack:
-                for c in ch[stack.pop()]:
-                    if c in z or known.get(c):
-                        known[v] = True
-                        return True
-                    if c not in seen and rank[c] < limit and c not in known:
-                        seen.add(c)
-                        stack.append(c)
-            known.update(dict.fromkeys(seen, False))
-            return False
-
-        return test
-
-    def check(self, x: int, z: set[int], reward: int) -> tuple[str, list[int] | None]:
+    def check(self, x: int, reward: int) -> tuple[str, list[int] | None]:
         """Definition 2 for ``x`` (every later action already made future)."""
         if x not in self.causes_reward:
             return "not_ancestor", None
+        z = self.sets[x]
         path = find_open_path(self.pa, self.ch, self.sp, [x], z.__contains__, self._ancestor_test(x, z), reward.__eq__, cut=x)
         return ("separated", None) if path is None else ("open_path", path)
+
+
+def _ancestor_test(rank: Sequence[int], ch: Sequence[Sequence[int]], x: int, in_z: Callable[[int], bool]) -> Callable[[int], bool]:
+    """``v ∈ An(Z)`` through nodes before ``x`` (``Z`` precedes ``x``), searched lazily and
+    remembered for one check."""
+    limit = rank[x]
+    known: dict[int, bool] = {}
+
+    def test(v: int) -> bool:
+        if in_z(v):
+            return True
+        if rank[v] >= limit:
+            return False
+        if v in known:
+            return known[v]
+        seen = {v}
+        stack = [v]
+        while stack:
+            for c in ch[stack.pop()]:
+                if in_z(c) or known.get(c):
+                    known[v] = True
+                    return True
+                if c not in seen and rank[c] < limit and c not in known:
+                    seen.add(c)
+                    stack.append(c)
+        known.update(dict.fromkeys(seen, False))
+        return False
+
+    return test
+
+
+class SetRule(Protocol):
+    """A family of adjustment sets given by a rule instead of a list, on one diagram's ids.
+
+    A window conditions every step on the same lags, so its family lists ``O(H k)`` nodes
+    over ``H`` actions although the rule that makes it is ``O(k)``: checking Definition 2
+    through the rule (:func:`sequential_pi_backdoor_by_rule`) costs what the searches
+    visit, not what the family lists.
+    """
+
+    def holds(self, action: int, node: int) -> bool:
+        """Whether ``node`` is in the set of ``action``."""
+        ...
+
+    def members(self, action: int) -> list[int]:
+        """The set of ``action`` in the order :func:`sequential_pi_backdoor` would list it
+        (the iteration order of the ``set`` of ids it builds from the named set)."""
+        ...
+
+    def holders(self, node: int, after: int) -> list[int]:
+        """The actions later than the action ``after`` whose set holds ``node``, latest first."""
+        ...
+
+    def policy_ancestors(self, reward: int) -> set[int]:
+        """``reward`` and its ancestors once every action responds to its set alone."""
+        ...
+
+
+class _RuleManipulatedGraph:
+    """:class:`_ManipulatedGraph` of a family given by a :class:`SetRule`: its adjacency
+    lists are computed when the search asks for them, each equal, element for element and
+    in order, to the list :class:`_ManipulatedGraph` would hold at that check. So the
+    searches, and the paths they return, are the same, without the ``O(H k)`` set edges.
+
+    In :class:`_ManipulatedGraph` at the check of ``X_t`` the later actions have been made
+    future, latest first: a node's children are its original children less the future
+    actions, then the future actions whose set holds it, latest first (appended in that
+    order); a future action's parents are its set and it has no siblings; every other
+    sibling list loses the future actions.
+    """
+
+    def __init__(self, diagram: CausalDiagram, rule: SetRule, action_ids: Sequence[int], reward: int) -> None:
+        g = diagram.indexed
+        self.g = g
+        self.rule = rule
+        self.rank = g.rank
+        self.actions = frozenset(action_ids)
+        self.boundary = len(g.nodes)  # rank of the earliest future action (none yet)
+        self.current = -1  # the action being checked
+        self.causes_reward = rule.policy_ancestors(reward)
+        self._members: dict[int, list[int]] = {}
+        self.pa = _LazyLists(self._parents)
+        self.ch = _LazyLists(self._children)
+        self.sp = _LazyLists(self._siblings)
+        self.original_ch = g.children
+
+    def _future(self, v: int) -> bool:
+        return v in self.actions and self.rank[v] >= self.boundary
+
+    def _parents(self, v: int) -> Sequence[int]:
+        if self._future(v):
+            if v not in self._members:
+                self._members[v] = self.rule.members(v)
+            return self._members[v]
+        return self.g.parents[v]
+
+    def _children(self, v: int) -> list[int]:
+        kept = [c for c in self.g.children[v] if not self._future(c)]
+        return kept + self.rule.holders(v, self.current)
+
+    def _siblings(self, v: int) -> Sequence[int]:
+        if self._future(v):
+            return ()
+        return [s for s in self.g.siblings[v] if not self._future(s)]
+
+    def make_future(self, action: int) -> None:
+        self.boundary = self.rank[action]
+
+    def check(self, x: int, reward: int) -> tuple[str, list[int] | None]:
+        self.current = x
+        if x not in self.causes_reward:
+            return "not_ancestor", None
+
+        def in_z(v: int) -> bool:
+            return self.rule.holds(x, v)
+
+        # An(Z) only walks nodes before x, whose children in G'_t are the original ones
+        # (the set edges all point into later actions).
+        collider_open = _ancestor_test(self.rank, self.original_ch, x, in_z)
+        path = find_open_path(self.pa, self.ch, self.sp, [x], in_z, collider_open, reward.__eq__, cut=x)
+        return ("separated", None) if path is None else ("open_path", path)
+
+
+class _LazyLists(Sequence[Sequence[int]]):
+    """A read-only sequence whose item ``v`` is computed when asked for."""
+
+    def __init__(self, item: Callable[[int], Sequence[int]]) -> None:
+        self._item = item
+
+    def __getitem__(self, v):  # type: ignore[override]
+        return self._item(v)
+
+    def __len__(self) -> int:  # pragma: no cover - the searches only index
+        raise TypeError("a lazily computed adjacency has no length")
 
 
 def _adjustment_ids(
@@ -248,23 +369,61 @@ def sequential_pi_backdoor(
     """
     g, action_ids, y = _temporal(diagram, actions, reward)
     sets = _adjustment_ids(g, action_ids, adjustment, diagram.has_explicit_order)
+    checked = _checked(g, action_ids, check)
+    return _report(_ManipulatedGraph(g, sets, y), g, action_ids, checked, y)
+
+
+def _checked(g: CausalDiagram, action_ids: list[int], check: Iterable[Node] | None) -> set[int]:
     names = g.indexed.nodes
     checked = set(action_ids) if check is None else {g.indexed.id(v) for v in check}
     if not checked <= set(action_ids):
         raise GraphError(f"check names nodes that are not actions: {sorted(repr(names[v]) for v in checked - set(action_ids))}")
+    return checked
+
+
+def _report(
+    graph: _ManipulatedGraph | _RuleManipulatedGraph, g: CausalDiagram, action_ids: list[int], checked: set[int], y: int
+) -> BackdoorReport:
+    names = g.indexed.nodes
     reasons: dict[Node, str] = {}
     witnesses: dict[Node, tuple[Node, ...]] = {}
-    graph = _ManipulatedGraph(g, sets, y)
     for x in reversed(action_ids):
         if x in checked:
-            reason, path = graph.check(x, sets[x], y)
+            reason, path = graph.check(x, y)
             reasons[names[x]] = reason
             if path is not None:
                 witnesses[names[x]] = tuple(names[v] for v in path)
-        graph.make_future(x, sets[x])
+        graph.make_future(x)
     reasons = {names[x]: reasons[names[x]] for x in action_ids if x in checked}
     witnesses = {names[x]: witnesses[names[x]] for x in action_ids if names[x] in witnesses}
     return BackdoorReport(holds=not witnesses, reasons=reasons, witnesses=witnesses)
+
+
+def sequential_pi_backdoor_by_rule(
+    diagram: CausalDiagram,
+    actions: Iterable[Node],
+    reward: Node,
+    rule: SetRule,
+    check: Iterable[Node] | None = None,
+) -> BackdoorReport:
+    """:func:`sequential_pi_backdoor` of the family that ``rule`` gives, without listing it.
+
+    The report is the one :func:`sequential_pi_backdoor` gives for the listed family (the
+    same reasons and the same witness paths): the manipulated graphs' adjacency is computed
+    when the searches reach it, list for list as the listed check would hold it. The cost
+    is what the searches visit. ``diagram`` must have an explicit order (an unrolled
+    template has one), and ``rule`` must give observed sets that precede their actions; it
+    is not checked node by node (that would list the family).
+
+    Raises:
+        GraphError: a diagram without an explicit order, or the errors of
+            :func:`sequential_pi_backdoor` about the actions, the reward and ``check``.
+    """
+    if not diagram.has_explicit_order:
+        raise GraphError("sequential_pi_backdoor_by_rule needs a diagram with an explicit order (order=[...])")
+    g, action_ids, y = _temporal(diagram, list(actions), reward)
+    checked = _checked(g, action_ids, check)
+    return _report(_RuleManipulatedGraph(g, rule, action_ids, y), g, action_ids, checked, y)
 
 
 class _AncestralView:

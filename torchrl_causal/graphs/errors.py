@@ -17,7 +17,7 @@ from collections.abc import Hashable, Sequence
 
 from torchrl_causal.errors import TorchRLCausalError
 
-__all__ = ["BoundedInfluenceError", "GraphError", "NotImitableError", "WindowConstructionError"]
+__all__ = ["BoundedInfluenceError", "GraphError", "NotImitableError", "WindowConstructionError", "WindowSizeError"]
 
 
 class GraphError(TorchRLCausalError, ValueError):
@@ -74,4 +74,23 @@ class WindowConstructionError(NotImitableError):
 
     def __init__(self, message: str, actions: Sequence[Hashable] = (), witness: Sequence[Hashable] = (), horizon: int = 0) -> None:
         super().__init__(message, actions, witness)
+        self.horizon = horizon
+
+
+class WindowSizeError(GraphError):
+    """A window of ``k`` lags asked for an env whose episodes last ``horizon <= k`` steps: the
+    lags past ``horizon - 1`` would only ever hold padding, and each one adds a copy of the
+    state to every observation.
+
+    Attributes:
+        k: the window size asked for.
+        horizon: the env's horizon.
+    """
+
+    def __init__(self, k: int, horizon: int) -> None:
+        super().__init__(
+            f"window size k={k} must be < the env's horizon={horizon}: a window reaches at most horizon - 1 "
+            "steps back (each lag adds a copy of the state to every observation)"
+        )
+        self.k = k
         self.horizon = horizon

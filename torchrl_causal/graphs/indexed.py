@@ -186,26 +186,24 @@ def find_open_path(
         if 2 * s not in prev:
             prev[2 * s] = -1
             queue.append(2 * s)
+    # A target is returned when it is queued, not when it comes out of the queue: the queue
+    # is FIFO, so the first target queued is the first that would come out, with the same
+    # path, and the rest of the search (a window's later actions, say) is never expanded.
     while queue:
         state = queue.popleft()
         v = state >> 1
         origin = prev[state] == -1
-        if not origin and is_target(v):
-            walk = []
-            while state != -1:
-                walk.append(state >> 1)
-                state = prev[state]
-            return shortcut_walk(walk[::-1])
-        down = () if v == cut else children[v]
         moves: list[int] = []
+        # children[v] is read only where the walk goes on down (it may be computed on demand)
         if state & 1:
             if collider_open(v):
                 moves.extend(2 * p for p in parents[v] if p != cut)
                 moves.extend(2 * s + 1 for s in spouses[v])
-            if not blocked(v):
-                moves.extend(2 * c + 1 for c in down)
+            if not blocked(v) and v != cut:
+                moves.extend(2 * c + 1 for c in children[v])
         elif origin or not blocked(v):
-            moves.extend(2 * c + 1 for c in down)
+            if v != cut:
+                moves.extend(2 * c + 1 for c in children[v])
             if fixed is None or not fixed(v):
                 moves.extend(2 * p for p in parents[v] if p != cut)
                 moves.extend(2 * s + 1 for s in spouses[v])
@@ -215,5 +213,11 @@ def find_open_path(
             if nxt & 1 and fixed is not None and fixed(nxt >> 1):
                 continue
             prev[nxt] = state
+            if is_target(nxt >> 1):
+                walk = []
+                while nxt != -1:
+                    walk.append(nxt >> 1)
+                    nxt = prev[nxt]
+                return shortcut_walk(walk[::-1])
             queue.append(nxt)
     return None

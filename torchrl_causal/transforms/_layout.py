@@ -84,15 +84,15 @@ class WindowLayout:
         """Frames the online ring buffer keeps: the current step and ``k`` past ones."""
         return self.window.k + 1
 
-    def ring_index(self) -> torch.Tensor:
-        """``[k + 1, num_features]`` flat indices into a ``[k + 1, frame_width]`` ring.
+    def ring_index(self, slot: int) -> torch.Tensor:
+        """``[num_features]`` flat indices into a ``[k + 1, frame_width]`` ring whose current
+        frame sits in ``slot``: the frame ``lag`` steps back sits in slot
+        ``(slot - lag) mod (k + 1)``.
 
-        Row ``p`` serves the ring whose current frame sits in slot ``p``; the frame
-        ``lag`` steps back then sits in slot ``(p - lag) mod (k + 1)``.
+        One slot at a time: the table of every slot would hold ``(k + 1) x num_features``
+        indices, quadratic in ``k`` (1 GB at ``k = 2000`` on AntMaze).
         """
-        current = torch.arange(self.num_slots).unsqueeze(-1)
-        slot = (current - self.feature_lag).remainder(self.num_slots)
-        return slot * self.frame_width + self.feature_column
+        return (slot - self.feature_lag).remainder(self.num_slots) * self.frame_width + self.feature_column
 
     def bounds(self, variable_bounds: Mapping[str, tuple[torch.Tensor, torch.Tensor]]) -> tuple[torch.Tensor, torch.Tensor]:
         """Per-feature ``(low, high)`` (trailing dimension ``num_features``).
@@ -125,7 +125,20 @@ class LagRing:
         states: ``[*batch, state_width]`` first states of every env.
     """
 
-    __slots__ = ("frames", "slot", "action_shape", "_num_slots", "_state_width", "_flat", "_states", "_actions", "_index")
+    __slots__ = (
+        "frames",
+        "slot",
+        "action_shape",
+        "_num_slots",
+        "_state_width",
+        "_flat",
+        "_states",
+        "_actions",
+        "_index",
+        "_lag",
+        "_column",
+        "_frame_width",
+    )
 
     def __init__(self, layout: WindowLayout, states: torch.Tensor) -> None:
         batch = states.shape[:-1]
@@ -135,10 +148,18 @@ class LagRing:
         self._flat = self.frames.flatten(-2)
         self._states = tuple(self.frames[..., s, : layout.state_width] for s in range(layout.num_slots))
         self._actions = tuple(self.frames[..., s, layout.state_width :] for s in range(layout.num_slots))
-        self._index = tuple(layout.ring_index().to(states.device).unbind(0))
+        # what ring_index(slot) reads, on the ring's device, so that a step copies nothing to it
+        self._lag = layout.feature_lag.to(states.device)
+        self._column = layout.feature_column.to(states.device)
+        self._frame_width = layout.frame_width
+        self._index = self._index_at(0)
         self.action_shape = self._actions[0].shape
         self.slot = 0
         self._states[0].copy_(states)
+
+    def _index_at(self, slot: int) -> torch.Tensor:
+        """:meth:`WindowLayout.ring_index` of ``slot``, on the ring's device."""
+        return (slot - self._lag).remainder(self._num_slots) * self._frame_width + self._column
 
     @property
     def batch_size(self) -> torch.Size:
@@ -153,6 +174,7 @@ class LagRing:
         """Puts back saved ``frames`` and ``slot`` (a checkpointed episode in flight)."""
         self.frames.copy_(frames)
         self.slot = slot
+        self._index = self._index_at(slot)
 
     def record_action(self, action: torch.Tensor) -> None:
         """Stores the action taken at the current step (``[*batch, action_width]``)."""
@@ -161,11 +183,12 @@ class LagRing:
     def advance(self, states: torch.Tensor) -> None:
         """Moves to the next step, whose states are ``[*batch, state_width]``."""
         self.slot = (self.slot + 1) % self._num_slots
+        self._index = self._index_at(self.slot)
         self._states[self.slot].copy_(states)
 
     def encode(self) -> torch.Tensor:
         """``[*batch, num_features]``: the current encoding."""
-        return self._flat.index_select(-1, self._index[self.slot])
+        return self._flat.index_select(-1, self._index)
 
 
 def spec_bounds(spec: TensorSpec, batch_ndim: int, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor] | None:

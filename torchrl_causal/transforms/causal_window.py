@@ -15,6 +15,7 @@ from torchrl.envs.batched_envs import BatchedEnvBase
 
 from torchrl_causal.compat import reset_mask
 from torchrl_causal.errors import InvalidStateError, InvalidTypeError, InvalidValueError, MissingAttributeError, UnknownKeyError
+from torchrl_causal.graphs.errors import WindowSizeError
 from torchrl_causal.graphs.template import TimeSliceTemplate
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.transforms._layout import FeatureSlice, LagRing, WindowLayout, spec_bounds
@@ -118,8 +119,8 @@ class CausalWindowTransform(Transform):
 
         >>> from torchrl.envs import TransformedEnv
         >>> from torchrl_causal.envs import RouteChoiceEnv
-        >>> base = RouteChoiceEnv(batch_size=[4], seed=0)
-        >>> env = TransformedEnv(base, CausalWindowTransform.from_env(base, k=1))
+        >>> base = RouteChoiceEnv(batch_size=[4], seed=0)  # single-stage: horizon 1, so k = 0
+        >>> env = TransformedEnv(base, CausalWindowTransform.from_env(base, k=0))
         >>> sorted(env.observation_spec.keys())  # W, ("latent", "O") and ("scm", "U") hidden
         ['Z', 'observation', 'success']
     """
@@ -198,8 +199,16 @@ class CausalWindowTransform(Transform):
                 paper's ``V^O_t`` (observed state at lag 0 and the previous action) and
                 ``k`` only gets validated.
             **kwargs: forwarded to the constructor.
+
+        Raises:
+            WindowSizeError: ``k`` is not below the env's ``horizon`` (where the env has
+                one; a batched env's shortest), before anything is built.
+            ValueError: ``k`` is not an int >= 0.
         """
-        window = imitator_window(causal_template(env), k, causal=causal, mode=mode, window_matched=window_matched)
+        template, horizon = _template_and_horizon(env)
+        if horizon is not None and isinstance(k, int) and not isinstance(k, bool) and k >= horizon:
+            raise WindowSizeError(k, horizon)
+        window = imitator_window(template, k, causal=causal, mode=mode, window_matched=window_matched)
         return cls(window, **kwargs)
 
     @classmethod
@@ -694,44 +703,61 @@ def causal_template(env: EnvBase) -> TimeSliceTemplate:
         >>> causal_template(SerialEnv(2, RouteChoiceEnv)) == RouteChoiceEnv().causal_template
         True
     """
+    return _template_and_horizon(env)[0]
+
+
+def _as_horizon(value: object) -> int | None:
+    return value if isinstance(value, int) and not isinstance(value, bool) else None
+
+
+def _template_and_horizon(env: EnvBase) -> tuple[TimeSliceTemplate, int | None]:
+    """:func:`causal_template` and the shortest horizon of the (sub-)envs, None where no env
+    says its horizon."""
     while isinstance(env, TransformedEnv):
         env = env.base_env
     if not isinstance(env, BatchedEnvBase):
         template = getattr(env, "causal_template", None)
         if template is None:
             raise MissingAttributeError(f"{type(env).__name__} exposes no causal_template to build a window from")
-        return template
+        return template, _as_horizon(getattr(env, "horizon", None))
     if env.is_closed:
-        templates = _unstarted_sub_env_templates(env)
+        facts = _unstarted_sub_env_facts(env)
     else:
         try:
             templates = list(env.causal_template)
         except AttributeError:
             raise MissingAttributeError(f"the sub-envs of {type(env).__name__} expose no causal_template to build a window from") from None
+        try:
+            horizons = list(env.horizon)
+        except (AttributeError, TypeError):
+            horizons = [None] * len(templates)
+        facts = [(template, _as_horizon(h)) for template, h in zip(templates, horizons)]
+    templates = [template for template, _ in facts]
     for index, template in enumerate(templates[1:], 1):
         if template != templates[0]:
             raise InvalidValueError(
                 f"sub-env {index} of {type(env).__name__} has another causal template than sub-env 0: {template} != {templates[0]}"
             )
-    return templates[0]
+    known = [h for _, h in facts if h is not None]
+    return templates[0], min(known) if known else None
 
 
-def _unstarted_sub_env_templates(env: BatchedEnvBase) -> list[TimeSliceTemplate]:
-    """The template of every sub-env of a batched env that is not running, one env built per
-    distinct constructor."""
-    built: list[tuple[Any, Mapping[str, Any], TimeSliceTemplate]] = []
-    templates = []
+def _unstarted_sub_env_facts(env: BatchedEnvBase) -> list[tuple[TimeSliceTemplate, int | None]]:
+    """The template and horizon of every sub-env of a batched env that is not running, one
+    env built per distinct constructor."""
+    built: list[tuple[Any, Mapping[str, Any], tuple[TimeSliceTemplate, int | None]]] = []
+    facts = []
     for make, kwargs in zip(env.create_env_fn, env.create_env_kwargs):
-        template = next((t for f, kw, t in built if f is make and kw == kwargs), None)
-        if template is None:
+        fact = next((f for m, kw, f in built if m is make and kw == kwargs), None)
+        if fact is None:
             sub_env = make(**kwargs)
             try:
-                template = causal_template(sub_env)
+                fact = _template_and_horizon(sub_env)
             finally:
                 sub_env.close()
-            built.append((make, kwargs, template))
-        templates.append(template)
-    return templates
+            built.append((make, kwargs, fact))
+        facts.append(fact)
+    return facts
 
 
 def _encoding_dtype(dtypes) -> torch.dtype:
