@@ -14,8 +14,8 @@
    count, evaluation by its episodes, the rest by env steps.
 2. **The matmul floor, in the same process.** One thread's best ``torch.mm`` rate in fp32 and
    in bf16 (1024-square, the peak), and the matmul FLOPs of one update of the run's networks
-   (:class:`torch.utils.flop_counter.FlopCounterMode` over its forward and backward): the
-   floor is FLOPs / peak, the share is floor / measured time.
+   (the profiler's count over its forward and backward): the floor is FLOPs / peak, the
+   share is floor / measured time.
 3. **The update before and after, in the same process.** The recipe's update, eager, with
    the anchor's separate actor pass (``bc_separate_pass=True``, as before issue 56) and with
    the one pass, in fp32 and bf16: alternating rounds, medians, ratios of per-round medians.
@@ -40,7 +40,7 @@ import time
 
 import torch
 from gpu_throughput import make_batch, make_update
-from torch.utils.flop_counter import FlopCounterMode
+from torch.profiler import ProfilerActivity, profile
 
 from torchrl_causal.experiment import compose_config
 from torchrl_causal.experiment.builders import make_imitator_env, make_window, observation_dim
@@ -77,10 +77,12 @@ def matmul_peak(dtype: torch.dtype, seconds: float = 2.0) -> float:
 
 
 def update_flops(update, batch) -> int:
-    """Matmul FLOPs of one update (forward and backward), counted from the ops' shapes."""
-    with FlopCounterMode(display=False) as counter:
+    """Matmul FLOPs of one update (forward and backward), counted by the profiler from the
+    shapes of the matmuls it runs (``with_flops``; torch's FlopCounterMode cannot track
+    TensorDict modules)."""
+    with profile(activities=[ProfilerActivity.CPU], with_flops=True) as profiler:
         update(batch.clone())
-    return counter.get_total_flops()
+    return int(sum(event.flops for event in profiler.key_averages()))
 
 
 def update_seconds(variants: dict, batches: list, rounds: int) -> dict[str, float]:
