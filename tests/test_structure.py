@@ -26,7 +26,8 @@ NAME = PACKAGE.name
 #: trainers checkpoint with. The old module paths of what left ``envs`` (:data:`FORWARDS`)
 #: stand on the top floor with the README's command paths.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("errors", "conf", "extras", "algorithms"),
+    ("errors",),  # every refusal of the package derives from its root
+    ("conf", "extras", "algorithms"),
     ("graphs", "progress", "compat"),
     ("envs",),
     ("modules", "objectives", "transforms", "data"),
