@@ -26,7 +26,7 @@ NAME = PACKAGE.name
 #: trainers checkpoint with. The old module paths of what left ``envs`` (:data:`FORWARDS`)
 #: stand on the top floor with the README's command paths.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("errors",),
+    ("errors",),  # every refusal of the package derives from its root
     ("conf", "extras", "algorithms", "available"),
     ("graphs", "progress", "compat"),
     ("envs",),

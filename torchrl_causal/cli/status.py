@@ -107,7 +107,7 @@ def run_statuses(root: str | Path) -> list[dict[str, str]]:
 
     Raises:
         FileNotFoundError: if ``root`` does not exist.
-        NotADirectoryError: if ``root`` is a file.
+        InvalidValueError: if ``root`` is a file (a ``ValueError``).
         RunFileError: a run's ``status.json`` or evaluation that does not parse, named.
     """
     root = Path(root)
