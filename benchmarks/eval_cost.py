@@ -16,11 +16,11 @@ Usage:
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import torch
 
+from torchrl_causal.cli.arguments import OneLineParser, count, non_negative
 from torchrl_causal.evaluation.metrics import evaluate_policy
 from torchrl_causal.experiment.device import for_cpu_env
 from torchrl_causal.experiment.provenance import cpu_model
@@ -28,13 +28,13 @@ from torchrl_causal.lifecycle import open_run
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument("--run-dir", required=True)
     parser.add_argument("--regime", default="deploy")
-    parser.add_argument("--episodes", type=int, default=50)
-    parser.add_argument("--num-envs", type=int, default=None)
-    parser.add_argument("--seed", type=int, default=30_000)
-    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--episodes", type=count, default=50)
+    parser.add_argument("--num-envs", type=count, default=None)
+    parser.add_argument("--seed", type=non_negative, default=30_000)
+    parser.add_argument("--repeats", type=count, default=2)
     args = parser.parse_args()
     torch.set_num_threads(1)
     _, evaluator, policy = open_run(args.run_dir)

@@ -20,11 +20,10 @@ every failed episode once, in this order:
 
 from __future__ import annotations
 
-import argparse
-
 import torch
 from tensordict.nn import InteractionType, set_interaction_type
 
+from torchrl_causal.cli.arguments import OneLineParser, count, non_negative, positive_number
 from torchrl_causal.envs import HumanoidMazeEnv, MazePlanner
 from torchrl_causal.lifecycle import open_run
 
@@ -76,22 +75,17 @@ def classify(run_dir: str, regime: str, episodes: int, seed: int, flip_height: f
     return {"episodes": episodes, **{name: int(mask.sum()) for name, mask in counts.items()}}
 
 
-def positive(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
-
-
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="+", help="run directories (with checkpoints/best.pt, or an expert run)")
     parser.add_argument("--regime", default="deploy", choices=["train", "deploy"])
-    parser.add_argument("--episodes", type=positive, default=100)
-    parser.add_argument("--seed", type=int, default=40_000)
-    parser.add_argument("--flip-height", type=float, default=0.35, help="ant: torso height (m) below which it has flipped")
-    parser.add_argument("--fall-height", type=float, default=0.9, help="humanoid: head height (m) below which it has fallen")
-    parser.add_argument("--short", type=float, default=2.0, help="metres from the goal within which an upright failure stopped short")
+    parser.add_argument("--episodes", type=count, default=100)
+    parser.add_argument("--seed", type=non_negative, default=40_000)
+    parser.add_argument("--flip-height", type=positive_number, default=0.35, help="ant: torso height (m) below which it has flipped")
+    parser.add_argument("--fall-height", type=positive_number, default=0.9, help="humanoid: head height (m) below which it has fallen")
+    parser.add_argument(
+        "--short", type=positive_number, default=2.0, help="metres from the goal: an upright failure within it stopped short"
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
     print(f"| run | {args.regime} episodes | " + " | ".join(f"{name.replace('_', ' ')} %" for name in CLASSES) + " |")

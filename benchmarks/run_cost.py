@@ -30,9 +30,10 @@ from __future__ import annotations
 
 import os
 
+from torchrl_causal.cli.arguments import OneLineParser, count
+
 os.environ.setdefault("TORCHINDUCTOR_COMPILE_THREADS", "1")  # before torch: compile in-process, where it is timed
 
-import argparse
 import math
 import statistics
 import tempfile
@@ -121,15 +122,15 @@ def full_run_counts(cfg, total_steps: int, bc_updates: int, critic_updates: int)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=16_000, help="env steps of the short run")
-    parser.add_argument("--full-steps", type=int, default=400_000, help="the budget projected to")
-    parser.add_argument("--bc-updates", type=int, default=2000, help="the short run's warm start: behaviour-cloning updates")
-    parser.add_argument("--critic-updates", type=int, default=500, help="the short run's warm start: critic updates")
-    parser.add_argument("--eval-episodes", type=int, default=10, help="the short run's periodic and final evaluation episodes")
-    parser.add_argument("--eval-every", type=int, default=8000)
-    parser.add_argument("--updates", type=int, default=20, help="updates per round of the before/after comparison")
-    parser.add_argument("--rounds", type=int, default=5)
+    parser = OneLineParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=count, default=16_000, help="env steps of the short run")
+    parser.add_argument("--full-steps", type=count, default=400_000, help="the budget projected to")
+    parser.add_argument("--bc-updates", type=count, default=2000, help="the short run's warm start: behaviour-cloning updates")
+    parser.add_argument("--critic-updates", type=count, default=500, help="the short run's warm start: critic updates")
+    parser.add_argument("--eval-episodes", type=count, default=10, help="the short run's periodic and final evaluation episodes")
+    parser.add_argument("--eval-every", type=count, default=8000)
+    parser.add_argument("--updates", type=count, default=20, help="updates per round of the before/after comparison")
+    parser.add_argument("--rounds", type=count, default=5)
     parser.add_argument("--skip-run", action="store_true", help="only the floor and the before/after comparison")
     parser.add_argument("overrides", nargs="*", help="the training command's overrides (default: the AntMaze-Medium C-SQIL recipe)")
     args = parser.parse_args()
