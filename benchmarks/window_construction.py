@@ -16,7 +16,6 @@ Usage:
 
 from __future__ import annotations
 
-import argparse
 import gc
 import math
 import platform
@@ -27,6 +26,7 @@ import tracemalloc
 from collections.abc import Callable
 from pathlib import Path
 
+from torchrl_causal.cli.arguments import OneLineParser, count, non_negative
 from torchrl_causal.envs.antmaze import AntMazeEnv
 from torchrl_causal.envs.humanoidmaze import HumanoidMazeEnv
 from torchrl_causal.envs.route_choice import RouteChoiceEnv
@@ -92,24 +92,15 @@ def exponent(points: list[tuple[int, float]]) -> float | None:
     return sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sum((x - mx) ** 2 for x in xs)
 
 
-def positive_int(text: str) -> int:
-    value = int(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be an int >= 0, got {text}")
-    return value
-
-
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--ks", type=positive_int, nargs="+", default=[10, 50, 100, 200, 400, 999])
-    parser.add_argument("--old-max-k", type=positive_int, default=400, help="largest k the listed (quadratic) construction is run at")
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--ks", type=non_negative, nargs="+", default=[10, 50, 100, 200, 400, 999])
+    parser.add_argument("--old-max-k", type=non_negative, default=400, help="largest k the listed (quadratic) construction is run at")
     parser.add_argument("--templates", nargs="+", choices=sorted(TEMPLATES), default=["rovermaze", "antmaze", "humanoidmaze"])
     parser.add_argument("--modes", nargs="+", choices=["relaxed", "exact"], default=["relaxed", "exact"])
-    parser.add_argument("--repeats", type=positive_int, default=1)
+    parser.add_argument("--repeats", type=count, default=1)
     parser.add_argument("--output", type=Path, default=None, help="also write the table (markdown) here")
     args = parser.parse_args(argv)
-    if args.repeats < 1:
-        parser.error(f"--repeats must be >= 1, got {args.repeats}")
 
     lines = [
         f"CPU: {cpu_model()}; Python {platform.python_version()}; one thread; CPU time of this process "

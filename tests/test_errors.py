@@ -22,6 +22,11 @@ ROOT = "TorchRLCausalError"
 ALLOWED: dict[tuple[str, str], str] = {
     # A command line's exit (its status and one line for the shell), not an error of the library.
     ("*", "SystemExit"): "exit",
+    # An argparse type function must raise ArgumentTypeError: that is how argparse reports a bad flag
+    # (OneLineParser turns it into one line).
+    ("cli/arguments.py", "argparse.ArgumentTypeError"): "argparse type protocol",
+    # A sequence protocol method that must raise TypeError (len() of a lazily computed adjacency).
+    ("graphs/criteria.py", "TypeError"): "sequence protocol",
     # A module's __getattr__ must raise AttributeError: that is how Python looks names up.
     ("envs/__init__.py", "AttributeError"): "module attribute protocol",
     ("experts/__init__.py", "AttributeError"): "module attribute protocol",

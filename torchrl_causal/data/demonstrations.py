@@ -42,6 +42,7 @@ __all__ = [
     "FORMAT_VERSION",
     "DatasetError",
     "check_expected",
+    "tensor_bytes",
     "check_manifest",
     "dataset_checksum",
     "env_config",
@@ -81,15 +82,24 @@ def dataset_checksum(data: TensorDictBase, metadata: Mapping[str, Any]) -> str:
     digest.update(json.dumps({k: v for k, v in metadata.items() if k != "checksum"}, sort_keys=True).encode())
     for name, value in _leaves(data):
         digest.update(name.encode())
-        digest.update(_tensor_bytes(value))
+        digest.update(tensor_bytes(value))
     return digest.hexdigest()
 
 
-def _tensor_bytes(value: torch.Tensor) -> bytes:
-    # Flattened first: ``view(torch.uint8)`` refuses a 0-d tensor (the humanoid skill's
-    # ``command_frame`` buffer), and flattening leaves every other tensor's bytes as they were,
-    # so the digests already recorded in committed sets still match.
-    return value.detach().cpu().contiguous().reshape(-1).view(torch.uint8).numpy().tobytes()
+def tensor_bytes(value: torch.Tensor) -> bytes:
+    """The bytes of ``value``'s elements in row-major order, for digests: any shape (0-d and
+    empty tensors included), any layout (a broadcast or transposed view gives its elements' bytes).
+
+    Examples:
+        >>> tensor_bytes(torch.tensor(1.0)) == tensor_bytes(torch.tensor([1.0])), tensor_bytes(torch.zeros(0))
+        (True, b'')
+    """
+    # Flattened into a fresh row-major copy first: ``view(torch.uint8)`` refuses a 0-d tensor (the
+    # humanoid skill's ``command_frame`` buffer) and a zero stride (an empty or broadcast tensor);
+    # every other tensor's bytes stay as they were, so the digests already recorded still match.
+    # (``contiguous()`` and ``clone()`` keep a size-1 dimension's zero stride: a fresh tensor does not).
+    flat = torch.empty(value.numel(), dtype=value.dtype).copy_(value.detach().cpu().reshape(-1))
+    return flat.view(torch.uint8).numpy().tobytes() if flat.numel() else b""
 
 
 def policy_record(policy: Callable[[TensorDictBase], TensorDictBase]) -> dict[str, Any]:
@@ -114,7 +124,7 @@ def policy_record(policy: Callable[[TensorDictBase], TensorDictBase]) -> dict[st
         digest = hashlib.sha256()
         for name, value in sorted(policy.state_dict().items()):
             digest.update(f"{name}:{value.dtype}:{tuple(value.shape)}".encode())
-            digest.update(_tensor_bytes(value))
+            digest.update(tensor_bytes(value))
         weights = digest.hexdigest()
     settings = dict(getattr(policy, "settings", {}))
     return {"policy": f"{type(policy).__module__}.{type(policy).__qualname__}", "policy_settings": settings, "policy_weights": weights}

@@ -492,7 +492,7 @@ class ConfoundedEnv(EnvBase):
         self._step_count = self._step_count + 1
         self._success = success
         self._advance_exogenous()
-        if held is not None:  # after every draw of the step, before anything is read from the state
+        if held is not None and live is not None:  # after every draw of the step, before anything is read from the state
             rows = live.reshape(self.batch_size)
             for name, old in held.items():
                 setattr(self, name, _hold_rows(rows, getattr(self, name), old))

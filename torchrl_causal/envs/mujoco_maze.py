@@ -19,7 +19,7 @@ import math
 import os
 import sys
 from abc import abstractmethod
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -200,7 +200,7 @@ class BatchedSimulation:
             data.qvel[:] = qvel[k]
             mujoco.mj_forward(self.model, data)
 
-    def step(self, ctrl: np.ndarray, torso_force: np.ndarray, indices: Sequence[int] | None = None) -> None:
+    def step(self, ctrl: np.ndarray, torso_force: np.ndarray, indices: Iterable[int] | None = None) -> None:
         """One control step of the simulations ``indices`` (default: every one): ``ctrl`` is
         ``(n, nu)``, ``torso_force`` ``(n, 2)``, rows of the others ignored.
 

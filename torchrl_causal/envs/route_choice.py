@@ -164,7 +164,9 @@ class RouteChoiceEnv(ConfoundedEnv):
         state = getattr(self, "_state", fresh)
         self._state = {name: torch.where(mask, fresh[name], state[name]) for name in fresh}
 
-    def _transition(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def _transition(self, action: torch.Tensor, live: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        # Every row is computed, a partial step's skipped ones too: all the state lives in
+        # runtime_attributes, which the base puts back in the rows ``live`` does not set.
         z, wind = self._state["Z"], self._state["U"]
         route = (action.round() != z).to(torch.float32)  # A = X xor Z
         # Y's parents are {X, Z, U}: the route (X, Z) and the wind U.

@@ -245,7 +245,9 @@ class RoverMazeEnv(GustConfoundedEnv):
         self.heading = torch.where(mask, heading, self.heading)
         self.speed = torch.where(mask, 0.0, self.speed)
 
-    def _transition(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def _transition(self, action: torch.Tensor, live: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        # Every row is computed, a partial step's skipped ones too: all the state lives in
+        # runtime_attributes, which the base puts back in the rows ``live`` does not set.
         slip = None
         if self.params.heading_noise > 0:
             slip = self.params.heading_noise * torch.randn(self.heading.shape, generator=self.rng, device=self.device)

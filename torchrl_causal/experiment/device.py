@@ -133,7 +133,7 @@ def resolve_precision(value: Any) -> str:
     """
     name = "fp32" if value is None else str(getattr(value, "value", value))  # a config's str enum, or a str
     if name not in PRECISIONS:
-        raise ValueError(f"precision={name!r} must be one of {', '.join(PRECISIONS)}")
+        raise InvalidValueError(f"precision={name!r} must be one of {', '.join(PRECISIONS)}")
     return name
 
 

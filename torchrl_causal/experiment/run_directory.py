@@ -56,6 +56,7 @@ import torch
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from torchrl_causal.algorithms import Row
+from torchrl_causal.data.demonstrations import tensor_bytes
 from torchrl_causal.errors import InvalidValueError, MissingFileError, TorchRLCausalError
 
 __all__ = [
@@ -238,7 +239,7 @@ def is_run_config(path: str | os.PathLike) -> bool:
         False
     """
     try:
-        config = OmegaConf.load(path)
+        config = OmegaConf.load(Path(path))
     except Exception:  # noqa: BLE001 -- unreadable or not YAML: not provably a run's
         return False
     return isinstance(config, DictConfig) and all(key in config for key in _RUN_CONFIG_KEYS)
@@ -276,9 +277,8 @@ def policy_digest(policy_state: Mapping[str, Any]) -> str:
     """
     digest = hashlib.sha256()
     for name, value in sorted(policy_state.items()):
-        tensor = value.detach().cpu().contiguous().reshape(-1)
-        digest.update(f"{name}:{tensor.dtype}:{tuple(value.shape)}".encode())
-        digest.update(tensor.view(torch.uint8).numpy().tobytes())
+        digest.update(f"{name}:{value.dtype}:{tuple(value.shape)}".encode())
+        digest.update(tensor_bytes(value))
     return digest.hexdigest()
 
 

@@ -24,6 +24,8 @@ from collections import Counter, defaultdict
 from collections.abc import Iterator
 from contextlib import AbstractContextManager, contextmanager, nullcontext
 
+from torchrl_causal.errors import InvalidStateError
+
 __all__ = ["OTHER", "PartTimer", "cpu_seconds", "timed"]
 
 #: Where the time outside every part is charged.
@@ -98,7 +100,7 @@ class PartTimer:
             RuntimeError: when another timer is recording already.
         """
         if _RECORDING:
-            raise RuntimeError("a PartTimer is recording already: one at a time in a process")
+            raise InvalidStateError("a PartTimer is recording already: one at a time in a process")
         _RECORDING.append(self)
         self._mark = (cpu_seconds(), time.perf_counter())
         try:

@@ -375,7 +375,8 @@ class _WindowRule:
             return []
         var, s = named
         first = self.g.nodes[after][1] + 1 if after >= 0 else 0  # type: ignore[index]
-        index, held = self.g.index, []
+        index = self.g.index
+        held: list[int] = []
         for low, high in reversed(self.runs[var]):  # latest first: runs and times descending
             held.extend(index[self.action, t] for t in range(min(s + high, self.horizon - 1), max(s + low, first) - 1, -1))
         return held
@@ -392,7 +393,7 @@ class _WindowRule:
         for v in reversed(g.order):
             if v == reward:
                 continue
-            var, s = g.nodes[v]  # type: ignore[misc]
+            var, s = cast(tuple[str, int], g.nodes[v])
             ancestor = any(c in found for c in g.children[v] if c not in actions)
             if not ancestor and var in self.runs:
                 for low, high in self.runs[var]:
@@ -437,7 +438,7 @@ def _window_failures(
         check = None if horizon == horizons[-1] else actions[:k]
         diagram = template.unroll(horizon)
         if verification == "listed":
-            family = {(action, t): window.adjustment_set(t) for t in range(horizon)}
+            family: dict[Hashable, Iterable[Hashable]] = {(action, t): window.adjustment_set(t) for t in range(horizon)}
             report = sequential_pi_backdoor(diagram, actions, REWARD, family, check=check)
         else:
             rule = _WindowRule(template, window, diagram, horizon)
