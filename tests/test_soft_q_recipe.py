@@ -367,7 +367,9 @@ def test_the_recipe_warm_starts_a_run_and_fixes_its_schedule_span(tmp_path, capl
         assert caplog.text.count("critic fit 20/20") == 1 and trainer.update.updates == 20
     finally:
         trainer.close()
-    results = run(cfg)  # and the whole run completes, evaluating in both regimes
+    # And the whole run completes, evaluating in both regimes (in a folder of its own: the one
+    # above holds the bare trainer's replay/ without a run's config, which a run refuses to take).
+    results = run(compose_config([*RECIPE_TINY, f"run_root={tmp_path / 'whole'}"]))
     assert set(results) >= {"train", "deploy"}
 
 

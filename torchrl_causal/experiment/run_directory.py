@@ -760,7 +760,7 @@ class RunDirectory:
         """Writes the last checkpoint, or with ``best`` the selected policy and its identity
         (:meth:`policy_identity`, ``ignored`` naming the config keys a longer budget may change)."""
         atomic_save(dict(state), self.best_checkpoint if best else self.last_checkpoint)
-        if best:
+        if best and self.config_file.is_file():  # a trainer driven without a run's config records no identity
             self.write_json(self.policy_identity_file, self.policy_identity(state["policy"], ignored))
 
     def policy_identity(self, policy_state: Mapping[str, Any], ignored: Iterable[str] = ()) -> dict[str, Any]:
@@ -769,7 +769,9 @@ class RunDirectory:
         ignored = sorted(ignored)
         return {
             "policy": policy_digest(policy_state),
-            "config": config_digest(cast(dict[str, Any], OmegaConf.to_container(self.read_config())), ignored),
+            # The file as written, not migrated (read_config's layout): a move of a class the config
+            # names changes the layout, not the config the policy was selected under.
+            "config": config_digest(cast(dict[str, Any], OmegaConf.to_container(OmegaConf.load(self.config_file))), ignored),
             "window": _digest(self.read_json(self.window_file)) if self.window_file.is_file() else None,
             "config_ignored": ignored,
         }

@@ -727,11 +727,10 @@ def _template_and_horizon(env: EnvBase) -> tuple[TimeSliceTemplate, int | None]:
             templates = list(env.causal_template)
         except AttributeError:
             raise MissingAttributeError(f"the sub-envs of {type(env).__name__} expose no causal_template to build a window from") from None
-        try:
-            horizons = list(env.horizon)
-        except (AttributeError, TypeError):
-            horizons = [None] * len(templates)
-        facts = [(template, _as_horizon(h)) for template, h in zip(templates, horizons)]
+        # The horizon is not asked of running workers: a ParallelEnv worker whose env lacks the
+        # attribute dies on the query (its pipe breaks) instead of answering AttributeError; the
+        # k < horizon check is made where the envs are built (unstarted envs, the configs).
+        facts = [(template, None) for template in templates]
     templates = [template for template, _ in facts]
     for index, template in enumerate(templates[1:], 1):
         if template != templates[0]:
