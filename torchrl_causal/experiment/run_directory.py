@@ -57,6 +57,7 @@ __all__ = [
     "EVAL_DIR",
     "LOG_DIR",
     "TRAIN_CURVE",
+    "SUCCESS_CURVE",
     "RUNTIME_KEYS",
     "CheckpointError",
     "ConfigMismatchError",
@@ -85,6 +86,9 @@ CHECKPOINT_DIR = "checkpoints"
 REPLAY_DIR = "replay"
 LOCK_FILE = ".lock"
 TRAIN_CURVE = "eval/train_return"  # scalar logged at every periodic train-regime evaluation
+#: the success rate of a periodic evaluation in a regime (``eval/train_success`` is logged
+#: beside the training curve; a deploy one where a trainer evaluates in that regime too)
+SUCCESS_CURVE = "eval/{regime}_success"
 
 #: Config keys that change how a run executes or where it writes, never its numbers: they
 #: may differ between the attempts of one run (a resume on another machine, more threads).
@@ -328,6 +332,10 @@ class RunDirectory:
     @property
     def train_curve_file(self) -> Path:
         return self.log_dir / "scalars" / f"{TRAIN_CURVE}.csv"
+
+    def success_curve_file(self, regime: str) -> Path:
+        """The periodic evaluations' success rates in ``regime`` (a CSVLogger scalar file)."""
+        return self.log_dir / "scalars" / f"{SUCCESS_CURVE.format(regime=regime)}.csv"
 
     @property
     def last_checkpoint(self) -> Path:
