@@ -166,7 +166,8 @@ def test_report_writes_markdown_csv_and_figures(paper_runs: Path, tmp_path: Path
     assert "**90.7** ± 0.9" in text
     assert "python -m torchrl_causal.train ..." in text
     names = {p.name for p in report.figures}
-    assert names == {"antmaze_medium_training_curves.png", "antmaze_medium_trajectories.png"}
+    # no success curve in these runs; the aggregate needs only the final evaluations
+    assert names == {"antmaze_medium_training_curves.png", "antmaze_medium_trajectories.png", "antmaze_medium_aggregate.png"}
     assert all(p.stat().st_size > 1000 for p in report.figures)
 
 
@@ -475,3 +476,34 @@ def test_a_report_reads_several_roots_and_refuses_a_run_held_twice(tmp_path: Pat
         load_runs(tmp_path)  # a folder above both roots holds seed 0 twice
     with pytest.raises(FileNotFoundError, match="does not exist"):
         load_runs([table1, tmp_path / "missing"])
+
+
+def test_success_curves_and_the_aggregate_across_tasks(tmp_path: Path) -> None:
+    # Two tasks (envs), two seeds per row; the expert succeeds 80% on one and 50% on the other.
+    expert = {"antmaze_medium": 80.0, "antmaze_large": 50.0}
+    deploy = {("c_sqil", 0): 80.0, ("c_sqil", 1): 60.0, ("sqil", 0): 0.0, ("sqil", 1): 8.0}
+    for env, expert_rate in expert.items():
+        make_fake_run(tmp_path, "expert", env=env, deploy=(-100.0, expert_rate), train=(-100.0, expert_rate), episodes=100)
+        for (label, seed), rate in deploy.items():
+            shift = 10.0 if env == "antmaze_large" else 0.0  # the second task's rows differ
+            run_dir = make_fake_run(
+                tmp_path, label, seed=seed, env=env, deploy=(-100.0, rate / 2 + shift), train=(-100.0, 50.0), episodes=100
+            )
+            curve = "".join(f"{step},{0.1 * seed + step / 2000}\n" for step in (0, 500, 1000))
+            (run_dir / "logs" / "scalars" / "eval" / "train_success.csv").write_text(curve)
+    runs = load_runs(tmp_path)
+    assert {r.success_curves["train"][-1] for r in runs if r.label == "c_sqil"} == {(1000, 0.5), (1000, 0.6)}
+    report = write_report([tmp_path], tmp_path / "out", name="both")
+    names = {p.name for p in report.figures}
+    assert {"both_success_curves.png", "both_aggregate.png"} <= names
+    text = report.markdown.read_text()
+    # The main setting of each env is a task: C-SQIL's four normalised deploy scores, by hand.
+    scores = sorted(
+        (rate / 2 + (10.0 if env == "antmaze_large" else 0.0)) / expert[env]
+        for env in expert
+        for (label, _), rate in deploy.items()
+        if label == "c_sqil"
+    )
+    iqm = (scores[1] + scores[2]) / 2  # four runs: the middle two
+    row = next(line for line in text.splitlines() if line.startswith("| C-SQIL | 2 | 4 |"))
+    assert f"{iqm:.2f} [" in row and f"| {sum(scores) / 4:.2f} |" in row

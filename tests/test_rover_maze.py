@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 from torchrl.envs.utils import check_env_specs
 
 from torchrl_causal.envs import MAZE_MAPS, MazeLayout, RoverMazeEnv, RoverParameters, rotate
+from torchrl_causal.envs.rover_maze import ROVER_COLOURS
 from torchrl_causal.experts import MazePlanner, RoverExpert
 
 
@@ -198,3 +200,33 @@ def test_expert_succeeds(maze, batch, steps, minimum):
                 break
             td = env.maybe_reset(step["next"])
     assert reached.float().mean() >= minimum
+
+
+def test_top_down_render_draws_walls_goal_and_the_rover_facing_its_heading() -> None:
+    env = RoverMazeEnv(maze="u", batch_size=(2,), seed=0)
+    env.reset()
+    width, height = 100, 80
+    rows, cols = env.layout.walls.shape
+    scale = min(width / cols, height / rows) / env.layout.cell_size
+
+    def pixel(frame, x, y):  # world (x, y) -> the frame's pixel, the maze centred on the origin
+        return tuple(frame[int(height / 2 - y * scale), int(width / 2 + x * scale)].tolist())
+
+    free = env.layout.cell_center(torch.tensor((1, 3))).tolist()
+    env.position = torch.tensor([free, free], dtype=env.position.dtype)
+    env.heading = torch.tensor([[0.0], [math.pi / 2]], dtype=env.heading.dtype)
+    frames = env.render(width=width, height=height)
+    assert frames.shape == (2, height, width, 3) and frames.dtype == np.uint8
+    half = env.params.half_size
+    for frame, (dx, dy) in zip(frames, ((1.0, 0.0), (0.0, 1.0))):  # heading 0 faces +x, pi/2 faces +y
+        for cell in map(tuple, env.layout.walls.nonzero().tolist()):
+            assert pixel(frame, *env.layout.cell_center(torch.tensor(cell)).tolist()) == ROVER_COLOURS["wall"]
+        assert pixel(frame, *env.goal_position.reshape(-1).tolist()) == ROVER_COLOURS["goal"]
+        assert pixel(frame, *free) == ROVER_COLOURS["rover"]
+        assert pixel(frame, free[0] + 0.7 * half * dx, free[1] + 0.7 * half * dy) == ROVER_COLOURS["nose"]
+        assert pixel(frame, free[0] - 0.7 * half * dx, free[1] - 0.7 * half * dy) == ROVER_COLOURS["rover"]
+        assert pixel(frame, free[0] + 2 * half, free[1]) == ROVER_COLOURS["floor"]
+    with pytest.raises(ValueError, match="camera"):
+        env.render(camera="track")
+    with pytest.raises(ValueError, match="reset"):
+        RoverMazeEnv(maze="u", batch_size=(1,), seed=0).render()

@@ -7,7 +7,12 @@ import itertools
 import numpy as np
 import pytest
 
-from torchrl_causal.evaluation.seed_statistics import bootstrap_interval, interquartile_mean
+from torchrl_causal.evaluation.seed_statistics import (
+    bootstrap_interval,
+    interquartile_mean,
+    performance_profile,
+    stratified_bootstrap_interval,
+)
 
 
 def test_iqm_drops_a_quarter_at_each_end() -> None:
@@ -58,3 +63,51 @@ def test_sampled_bootstrap_approaches_the_exact_one(values) -> None:
     sampled = bootstrap_interval(values, exact=False, reps=8_000, seed=1)
     assert sampled == pytest.approx(exact, abs=0.03 * (max(values) - min(values)))
     assert bootstrap_interval(values, exact=False, reps=2_000, seed=3) == bootstrap_interval(values, exact=False, reps=2_000, seed=3)
+
+
+def _brute_force_stratified(tasks, confidence=0.95):
+    """Every ordered resample of every task (prod n_i^n_i of them), the IQM of the pooled runs,
+    then numpy's percentiles."""
+    per_task = [list(itertools.product(values, repeat=len(values))) for values in tasks]
+    stats = [interquartile_mean([x for resample in combination for x in resample]) for combination in itertools.product(*per_task)]
+    tail = 100 * (1 - confidence) / 2
+    return tuple(np.percentile(stats, [tail, 100 - tail]))
+
+
+@pytest.mark.parametrize("sizes", [(2, 3), (3, 3), (1, 4), (2, 2, 2)])
+def test_stratified_bootstrap_equals_brute_force(sizes) -> None:
+    rng = np.random.default_rng(sum(sizes))
+    tasks = [rng.uniform(0, 1.2, n).round(2).tolist() for n in sizes]
+    assert stratified_bootstrap_interval(tasks) == pytest.approx(_brute_force_stratified(tasks), abs=1e-9)
+    assert stratified_bootstrap_interval(tasks, confidence=0.6) == pytest.approx(_brute_force_stratified(tasks, 0.6), abs=1e-9)
+
+
+def test_stratified_bootstrap_of_one_task_is_the_plain_one_and_resamples_within_tasks() -> None:
+    values = [0.2, 0.9, 0.5, 0.7]
+    assert stratified_bootstrap_interval([values]) == bootstrap_interval(values)
+    assert stratified_bootstrap_interval([values], exact=False, reps=500) == bootstrap_interval(values, exact=False, reps=500)
+    # Constant tasks have nothing to resample: the interval collapses to the pooled IQM,
+    # which a plain bootstrap over the pooled runs (mixing the tasks) would not.
+    tasks = [[0.0, 0.0], [1.0, 1.0]]
+    assert stratified_bootstrap_interval(tasks) == (0.5, 0.5)
+    low, high = bootstrap_interval([0.0, 0.0, 1.0, 1.0])
+    assert low < 0.5 < high
+    with pytest.raises(ValueError, match="every task"):
+        stratified_bootstrap_interval([[0.5], []])
+
+
+def test_performance_profile_against_counting_and_its_invariants() -> None:
+    rng = np.random.default_rng(7)
+    tasks = [rng.uniform(0, 1.2, n).tolist() for n in (3, 5, 4)]
+    taus = np.linspace(0, 1.3, 27)
+    profile = performance_profile(tasks, taus)
+    counted = [sum(sum(x > tau for x in values) / len(values) for values in tasks) / len(tasks) for tau in taus]
+    assert profile.tolist() == pytest.approx(counted)
+    assert np.all(np.diff(profile) <= 0)  # non-increasing in tau
+    assert profile[0] == 1.0 and profile[-1] == 0.0  # every score in (0, 1.2]
+    # equal runs per task: the fraction of all runs (rliable's mean over the score matrix)
+    square = [values[:3] for values in tasks]
+    flat = np.asarray(square).ravel()
+    assert performance_profile(square, taus).tolist() == pytest.approx([(flat > tau).mean() for tau in taus])
+    with pytest.raises(ValueError, match="every task"):
+        performance_profile([], [0.5])

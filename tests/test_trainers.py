@@ -609,7 +609,13 @@ def test_a_set_collected_by_another_expert_is_refused_not_reused(tmp_path: Path)
     other = tiny_config(tmp_path, "rovermaze_u", "bc", True, "demos.episodes=2", "+env.expert.noise_std=0.1")
     assert other.demos.path == collected.demos.path
     for load in (check_demonstrations, load_or_collect_demonstrations):
-        with pytest.raises(DatasetError, match=r"'policy_settings.noise_std' is 0.2, expected 0.1\. Nothing was changed\. .* is a set collected by .*RoverExpert: delete that folder and rerun") as error:
+        with pytest.raises(
+            DatasetError,
+            match=(
+                r"'policy_settings.noise_std' is 0.2, expected 0.1\. Nothing was changed\. "
+                r".* is a set collected by .*RoverExpert: delete that folder and rerun"
+            ),
+        ) as error:
             load(other)
         assert "\n" not in str(error.value)
 

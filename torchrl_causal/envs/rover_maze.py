@@ -34,6 +34,7 @@ from dataclasses import asdict, dataclass
 from functools import cache
 from typing import TYPE_CHECKING
 
+import numpy as np
 import torch
 from torchrl.data import Bounded, Unbounded
 
@@ -44,7 +45,7 @@ from torchrl_causal.errors import InvalidValueError
 if TYPE_CHECKING:
     from torchrl_causal.graphs import TimeSliceTemplate
 
-__all__ = ["ROVER_TASKS", "RoverMazeEnv", "RoverParameters", "rover_dynamics"]
+__all__ = ["ROVER_COLOURS", "ROVER_TASKS", "RoverMazeEnv", "RoverParameters", "rover_dynamics", "top_down_frames"]
 
 ROVER_TASKS: dict[str, tuple[tuple[int, int], tuple[int, int]]] = {
     "u": ((1, 1), (3, 1)),
@@ -137,6 +138,83 @@ def rover_dynamics(
     return position, heading, speed
 
 
+#: RGB colours of :func:`top_down_frames`.
+ROVER_COLOURS: dict[str, tuple[int, int, int]] = {
+    "outside": (255, 255, 255),
+    "floor": (236, 236, 236),
+    "wall": (77, 77, 77),
+    "goal": (255, 196, 0),
+    "rover": (31, 119, 180),
+    "nose": (255, 255, 255),
+}
+
+
+def top_down_frames(
+    layout,
+    goal: torch.Tensor,
+    goal_radius: float,
+    positions: torch.Tensor,
+    headings: torch.Tensor,
+    half_size: float,
+    *,
+    width: int,
+    height: int,
+) -> np.ndarray:
+    """Top-down RGB frames of rovers in a maze, one per position: walls, the goal disc and
+    the rover's square footprint turned to its heading, with a white nose pointing forward.
+
+    The maze fills the frame at one scale on both axes (centred; the margin is white).
+
+    Args:
+        layout: the maze (a ``MazeLayout``: ``walls``, ``cell_size``, centred on the origin).
+        goal: the goal's ``(x, y)``; ``goal_radius``: the success radius drawn around it.
+        positions: ``(n, 2)`` rover positions; ``headings``: ``(n,)`` heading angles (radians).
+        half_size: half-side of the rover's square footprint.
+        width, height: the frame's size in pixels.
+
+    Returns:
+        ``(n, height, width, 3)`` uint8.
+
+    Examples:
+        >>> env = RoverMazeEnv(maze="u", batch_size=(2,), seed=0)
+        >>> _ = env.reset()
+        >>> frames = env.render(width=64, height=48)
+        >>> frames.shape, frames.dtype
+        ((2, 48, 64, 3), dtype('uint8'))
+    """
+    if width < 8 or height < 8:
+        raise ValueError(f"a frame needs width and height >= 8 pixels, got {width}x{height}")
+    rows, cols = layout.walls.shape
+    scale = min(width / cols, height / rows) / layout.cell_size  # pixels per world unit
+    # world (x, y) of every pixel centre; the maze is centred on the origin
+    px = (torch.arange(width, dtype=torch.float64) + 0.5 - width / 2) / scale
+    py = (height / 2 - torch.arange(height, dtype=torch.float64) - 0.5) / scale
+    x, y = torch.meshgrid(px, py, indexing="xy")  # (height, width)
+    col = torch.floor(x / layout.cell_size + cols / 2).long()
+    row = torch.floor(rows / 2 - y / layout.cell_size).long()
+    inside = (col >= 0) & (col < cols) & (row >= 0) & (row < rows)
+    wall = inside & layout.walls.cpu()[row.clamp(0, rows - 1), col.clamp(0, cols - 1)]
+    goal = goal.detach().reshape(-1)[:2].cpu().double()
+    at_goal = inside & ~wall & ((x - goal[0]) ** 2 + (y - goal[1]) ** 2 < goal_radius**2)
+    colours = {name: torch.tensor(rgb, dtype=torch.uint8) for name, rgb in ROVER_COLOURS.items()}
+    background = torch.empty(height, width, 3, dtype=torch.uint8)
+    background[:] = colours["outside"]
+    background[inside] = colours["floor"]
+    background[at_goal] = colours["goal"]
+    background[wall] = colours["wall"]
+    frames = background.expand(len(positions), -1, -1, -1).clone()
+    positions = positions.detach().reshape(-1, 2).cpu().double()
+    headings = headings.detach().reshape(-1).cpu().double()
+    for frame, (cx, cy), angle in zip(frames, positions.tolist(), headings.tolist()):
+        # the pixel in the rover's frame: ahead along the heading, and to its left
+        ahead = (x - cx) * math.cos(angle) + (y - cy) * math.sin(angle)
+        left = -(x - cx) * math.sin(angle) + (y - cy) * math.cos(angle)
+        body = (ahead.abs() <= half_size) & (left.abs() <= half_size)
+        frame[body] = colours["rover"]
+        frame[body & (ahead > 0.3 * half_size) & (left.abs() < 0.35 * half_size)] = colours["nose"]
+    return frames.numpy()
+
+
 class RoverMazeEnv(GustConfoundedEnv):
     """The Confounded RoverMaze as a batched TorchRL env.
 
@@ -223,6 +301,31 @@ class RoverMazeEnv(GustConfoundedEnv):
 
     def config(self) -> dict[str, object]:
         return {**super().config(), "maze": self.maze, "params": asdict(self.params)}
+
+    def render(self, *, width: int = 320, height: int = 320, camera: str | None = None) -> np.ndarray:
+        """Top-down RGB frames of every batch element, ``batch + (height, width, 3)`` uint8
+        (:func:`top_down_frames`: walls, goal, the rover's footprint and heading), drawn
+        with torch on the CPU: no GL context needed.
+
+        Raises:
+            ValueError: ``camera`` is given (the rover has only the top-down view), or the
+                env has not been reset yet (there is no rover to draw).
+        """
+        if camera is not None:
+            raise ValueError(f"RoverMaze renders only its top-down view: camera must be None, got {camera!r}")
+        if not hasattr(self, "position"):
+            raise ValueError("RoverMaze.render needs a rover: call reset() first")
+        frames = top_down_frames(
+            self.layout,
+            self.goal_position,
+            self.params.goal_radius,
+            self.position.reshape(-1, 2),
+            self.heading.reshape(-1),
+            self.params.half_size,
+            width=width,
+            height=height,
+        )
+        return frames.reshape(*self.batch_size, height, width, 3)
 
     def _make_variable_specs(self):
         batch = self.batch_size

@@ -10,17 +10,27 @@ from pathlib import Path
 from typing import Any
 
 from torchrl_causal.errors import ExistingFileError, MissingFileError
-from torchrl_causal.evaluation.plots import ABLATION_AXES, plot_ablation, plot_training_curves, plot_trajectories
+from torchrl_causal.evaluation.plots import (
+    ABLATION_AXES,
+    BAND,
+    plot_ablation,
+    plot_aggregate,
+    plot_success_curves,
+    plot_training_curves,
+    plot_trajectories,
+)
 from torchrl_causal.evaluation.runs import RunRecord, Setting, load_runs
 from torchrl_causal.evaluation.tables import (
     CSV_COLUMNS,
     EffectTargets,
     aggregate,
+    aggregate_markdown,
     csv_rows,
     display_name,
     effect_checks,
     effect_markdown,
     lengths_markdown,
+    normalised_scores,
     raw_markdown,
     read_reported_rows,
     seed_effect_checks,
@@ -56,6 +66,16 @@ def _main_setting(runs: Sequence[RunRecord], carried: Mapping[Setting, Sequence[
     # Most runs (a carried row counts as one) first; ties go to the strongest confounding
     # and the longest horizon, which is the paper's default configuration.
     return max(counts, key=lambda s: (counts[s], s.strength, s.horizon, -s.k))
+
+
+def _task_runs(runs: Sequence[RunRecord]) -> list[RunRecord]:
+    """The runs of each env's main setting (the most runs): the tasks the expert-normalised
+    aggregate pools, one per env, so that an ablation's other settings do not count as tasks."""
+    by_env: dict[str, list[RunRecord]] = defaultdict(list)
+    for run in runs:
+        by_env[run.setting.env].append(run)
+    mains = {_main_setting(env_runs, {}) for env_runs in by_env.values()}
+    return [run for run in runs if run.setting in mains]
 
 
 def _search(path: str | Path, pattern: str) -> re.Match[str] | None:
@@ -235,9 +255,13 @@ def write_report(
     by_label: dict[str, list[RunRecord]] = defaultdict(list)
     for run in main_runs:
         by_label[run.label].append(run)
+    task_runs = _task_runs(runs)
+    scores = [normalised_scores(task_runs, regime) for regime in ("deploy", "train")]
     figures = {
         "training curves": plot_training_curves(main_runs, out_dir / f"{name}_training_curves.png"),
+        f"success rate over training (band: {BAND})": plot_success_curves(main_runs, out_dir / f"{name}_success_curves.png"),
         "deploy-regime trajectories": plot_trajectories(by_label, out_dir / f"{name}_trajectories.png"),
+        "IQM and performance profile of the expert-normalised success": plot_aggregate(scores, out_dir / f"{name}_aggregate.png"),
     }
     for axis in ABLATION_AXES:
         figures[f"{ABLATION_AXES[axis]} ablation"] = plot_ablation(aggregated, axis, out_dir / f"{name}_ablation_{axis}.png")
@@ -290,6 +314,30 @@ def write_report(
         checks = effect_checks(table, targets)
         if checks:
             lines += ["### The paper's effect, checked", "", effect_markdown(checks), ""]
+    if any(regime_scores.scores for regime_scores in scores):
+        lines += [
+            "## Across tasks: expert-normalised success",
+            "",
+            "Each run's success rate over the expert's in its task and regime (the expert pooled over its runs), "
+            "pooled over "
+            + ", ".join(sorted({run.setting.describe() for run in task_runs}))
+            + " (each env's setting with the most runs; the table's own rows, not carried ones). "
+            "IQM: the mean of the middle half of the runs; its interval is the 95% percentile bootstrap that "
+            "resamples the seeds within each task (rliable's stratified bootstrap, exact where the resamples are "
+            f"few enough). Figures: `{name}_aggregate.png` (IQM and performance profile, the fraction of runs "
+            f"above each score), `{name}_success_curves.png` (mean over seeds, band {BAND}).",
+            "",
+        ]
+        for regime_scores in scores:
+            if regime_scores.scores:
+                lines += [f"### {regime_scores.regime.capitalize()} regime", "", aggregate_markdown(regime_scores), ""]
+                if regime_scores.left_out:
+                    lines += [
+                        "Not normalised: "
+                        + "; ".join(f"{setting.describe()} ({why})" for setting, why in sorted(regime_scores.left_out.items()))
+                        + ".",
+                        "",
+                    ]
     lines += [
         "## What made these runs",
         "",

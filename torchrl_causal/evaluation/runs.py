@@ -46,6 +46,7 @@ __all__ = [
     "copy_selected_policy",
     "POLICY_CHECKPOINT_KEYS",
     "mean_curve",
+    "seed_band",
 ]
 
 
@@ -77,6 +78,8 @@ class RunRecord:
     evaluations: Mapping[str, EvaluationResult]
     curve: Sequence[tuple[int, float]] = ()
     unit: str = ""  # what the curve's steps count (env steps, epochs, rounds)
+    #: the periodic evaluations' success rate per regime (``"train"``; ``"deploy"`` where recorded)
+    success_curves: Mapping[str, Sequence[tuple[int, float]]] = field(default_factory=dict)
     maze: Mapping[str, Any] | None = field(default=None, compare=False)
     #: what each attempt trained under (``code.json``: code, packages, CPU, threads); empty
     #: for a run recorded before attempts were
@@ -131,6 +134,11 @@ def load_run(run_dir: str | Path) -> RunRecord:
         seed=int(cfg.seed),
         evaluations=evaluations,
         curve=read_scalar_csv(curve_file) if curve_file.is_file() else (),
+        success_curves={
+            regime: read_scalar_csv(run.success_curve_file(regime))
+            for regime in ("train", "deploy")
+            if run.success_curve_file(regime).is_file()
+        },
         unit=run.read_status().get("unit", ""),
         maze=maze,
         attempts=tuple(run.read_attempts()),
@@ -304,8 +312,19 @@ def mean_curve(curves: Iterable[Sequence[tuple[int, float]]]) -> list[tuple[int,
         >>> mean_curve([[(0, 1.0), (5, 3.0)], [(0, 3.0), (5, 5.0), (9, 0.0)]])
         [(0, 2.0), (5, 4.0)]
     """
+    return [(step, mean) for step, mean, _, _ in seed_band(curves)]
+
+
+def seed_band(curves: Iterable[Sequence[tuple[int, float]]]) -> list[tuple[int, float, float, float]]:
+    """``(step, mean, min, max)`` over the seeds' curves at the steps every curve logged: the
+    mean and the min-max band a seed-band figure draws.
+
+    Examples:
+        >>> seed_band([[(0, 0.2), (5, 0.6)], [(0, 0.4), (5, 1.0), (9, 1.0)]])
+        [(0, 0.30000000000000004, 0.2, 0.4), (5, 0.8, 0.6, 1.0)]
+    """
     by_step = [dict(c) for c in curves if c]
     if not by_step:
         return []
     steps = sorted(set.intersection(*(set(c) for c in by_step)))
-    return [(s, math.fsum(c[s] for c in by_step) / len(by_step)) for s in steps]
+    return [(s, math.fsum(c[s] for c in by_step) / len(by_step), min(c[s] for c in by_step), max(c[s] for c in by_step)) for s in steps]

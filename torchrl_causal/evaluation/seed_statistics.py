@@ -21,6 +21,18 @@
   percentile has no limit), the two values either side are averaged (numpy's
   ``method="averaged_inverted_cdf"``). Beyond the enumerable sizes it is sampled (``reps``
   draws from a fixed generator, rliable's default 50,000).
+* :func:`stratified_bootstrap_interval`: rliable's ``StratifiedBootstrap`` across tasks:
+  each task's runs (seeds) are resampled with replacement within the task, the statistic is
+  computed on the pooled resample (rliable's IQM of the flattened runs x tasks matrix), and
+  the percentile interval is taken as above; exact where the product over tasks of the
+  per-task resamples is at most ``EXACT_LIMIT``. :func:`bootstrap_interval` is its one-task case.
+* :func:`performance_profile`: rliable's run-score distribution, the fraction of runs whose
+  score exceeds each threshold tau (``mean(scores > tau)``); each task weighs the same (the
+  mean over tasks of the task's fraction), which is rliable's fraction of the matrix's runs
+  when every task has the same number of runs.
+
+rliable itself is not a dependency: it pins ``arch`` (and with it pandas and statsmodels)
+for its percentile interval, and samples where these functions enumerate.
 """
 
 from __future__ import annotations
@@ -33,7 +45,7 @@ import numpy as np
 
 from torchrl_causal.errors import InvalidValueError
 
-__all__ = ["bootstrap_interval", "interquartile_mean"]
+__all__ = ["bootstrap_interval", "interquartile_mean", "performance_profile", "stratified_bootstrap_interval"]
 
 # Largest number of distinct resamples (multisets, C(2n - 1, n)) enumerated exactly:
 # n <= 9 seeds (24,310 multisets); 10 seeds would be 92,378.
@@ -77,15 +89,82 @@ def _quantiles_of_counts(values: np.ndarray, counts: np.ndarray, quantiles: Sequ
     return out
 
 
-def _exact_distribution(values: Sequence[float], statistic: Callable[[Sequence[float]], float]) -> tuple[np.ndarray, np.ndarray]:
-    n = len(values)
-    stats, counts = [], []
+def _multisets(n: int) -> list[tuple[tuple[int, ...], int]]:
+    """Every resample of ``n`` values with replacement as a multiset of indices, with the
+    number of ordered resamples that give it (``n! / prod(m_i!)``)."""
+    out = []
     for chosen in itertools.combinations_with_replacement(range(n), n):
         multiplicities = np.bincount(chosen, minlength=n)
-        # ordered resamples giving this multiset: n! / prod(m_i!)
-        counts.append(math.factorial(n) // math.prod(math.factorial(int(m)) for m in multiplicities))
-        stats.append(statistic([values[i] for i in chosen]))
+        out.append((chosen, math.factorial(n) // math.prod(math.factorial(int(m)) for m in multiplicities)))
+    return out
+
+
+def _exact_distribution(tasks: Sequence[Sequence[float]], statistic: Callable[[Sequence[float]], float]) -> tuple[np.ndarray, np.ndarray]:
+    """The statistic of every stratified resample (one multiset per task) and its weight."""
+    stats, counts = [], []
+    for combination in itertools.product(*(_multisets(len(values)) for values in tasks)):
+        pooled = [values[i] for values, (chosen, _) in zip(tasks, combination) for i in chosen]
+        stats.append(statistic(pooled))
+        counts.append(math.prod(count for _, count in combination))
     return np.asarray(stats, dtype=float), np.asarray(counts, dtype=np.int64)
+
+
+def _distinct_resamples(sizes: Sequence[int]) -> int:
+    return math.prod(math.comb(2 * n - 1, n) for n in sizes)
+
+
+def stratified_bootstrap_interval(
+    tasks: Sequence[Sequence[float]],
+    statistic: Callable[[Sequence[float]], float] = interquartile_mean,
+    confidence: float = 0.95,
+    *,
+    reps: int = 50_000,
+    seed: int = 0,
+    exact: bool | None = None,
+) -> tuple[float, float]:
+    """Percentile bootstrap interval of ``statistic`` over runs grouped by task, resampling
+    the runs of each task within it (rliable's stratified bootstrap).
+
+    Args:
+        tasks: per task, one score per run (seed); tasks may hold different numbers of runs.
+        statistic: computed on each resample's pooled runs (default: the IQM).
+        confidence: the interval's coverage.
+        reps: draws when the distribution is sampled.
+        seed: the sampling generator's seed.
+        exact: enumerate every resample (default: when there are at most ``EXACT_LIMIT``
+            distinct ones: the product over tasks of ``C(2n - 1, n)``).
+
+    Returns:
+        ``(low, high)``; one run per task gives the statistic twice.
+
+    Raises:
+        ValueError: no task, an empty task, or ``confidence`` outside (0, 1).
+
+    Examples:
+        >>> # two tasks of two runs: the IQM of four pooled runs is the mean of the middle two
+        >>> low, high = stratified_bootstrap_interval([[0.0, 1.0], [0.5, 0.5]])
+        >>> round(low, 4), round(high, 4)
+        (0.25, 0.75)
+        >>> stratified_bootstrap_interval([[0.3], [0.9]])  # nothing to resample
+        (0.6, 0.6)
+    """
+    tasks = [list(values) for values in tasks]
+    if not tasks or any(not values for values in tasks):
+        raise InvalidValueError(f"stratified_bootstrap_interval needs at least one run in every task, got sizes {[len(t) for t in tasks]}")
+    if not 0 < confidence < 1:
+        raise InvalidValueError(f"confidence must be in (0, 1), got {confidence}")
+    tail = (1 - confidence) / 2
+    if exact is None:
+        exact = _distinct_resamples([len(values) for values in tasks]) <= EXACT_LIMIT
+    if exact:
+        stats, counts = _exact_distribution(tasks, statistic)
+        low, high = _quantiles_of_counts(stats, counts, (tail, 1 - tail))
+        return low, high
+    generator = np.random.default_rng(seed)
+    arrays = [np.asarray(values, dtype=float) for values in tasks]
+    draws = [statistic([x for array in arrays for x in array[generator.integers(0, len(array), len(array))].tolist()]) for _ in range(reps)]
+    low, high = np.percentile(draws, [100 * tail, 100 * (1 - tail)])
+    return float(low), float(high)
 
 
 def bootstrap_interval(
@@ -97,7 +176,8 @@ def bootstrap_interval(
     seed: int = 0,
     exact: bool | None = None,
 ) -> tuple[float, float]:
-    """Percentile bootstrap confidence interval of ``statistic`` over ``values`` (one per seed).
+    """Percentile bootstrap confidence interval of ``statistic`` over ``values`` (one per seed):
+    :func:`stratified_bootstrap_interval` with one task.
 
     Args:
         values: one score per seed.
@@ -122,18 +202,31 @@ def bootstrap_interval(
     """
     if not len(values):
         raise InvalidValueError("bootstrap_interval needs at least one value")
-    if not 0 < confidence < 1:
-        raise InvalidValueError(f"confidence must be in (0, 1), got {confidence}")
-    n = len(values)
-    tail = (1 - confidence) / 2
-    if exact is None:
-        exact = math.comb(2 * n - 1, n) <= EXACT_LIMIT
-    if exact:
-        stats, counts = _exact_distribution(list(values), statistic)
-        low, high = _quantiles_of_counts(stats, counts, (tail, 1 - tail))
-        return low, high
-    generator = np.random.default_rng(seed)
-    array = np.asarray(values, dtype=float)
-    draws = [statistic(array[generator.integers(0, n, n)].tolist()) for _ in range(reps)]
-    low, high = np.percentile(draws, [100 * tail, 100 * (1 - tail)])
-    return float(low), float(high)
+    return stratified_bootstrap_interval([values], statistic, confidence, reps=reps, seed=seed, exact=exact)
+
+
+def performance_profile(tasks: Sequence[Sequence[float]], thresholds: Sequence[float]) -> np.ndarray:
+    """Fraction of runs whose score exceeds each threshold (rliable's run-score
+    distribution), each task weighing the same.
+
+    Args:
+        tasks: per task, one score per run.
+        thresholds: the taus.
+
+    Returns:
+        One fraction in [0, 1] per threshold, non-increasing in the threshold.
+
+    Raises:
+        ValueError: no task, or an empty task.
+
+    Examples:
+        >>> performance_profile([[0.2, 0.6, 1.0, 1.1]], [0.0, 0.5, 1.0]).tolist()
+        [1.0, 0.75, 0.25]
+        >>> performance_profile([[0.0], [1.0, 1.0, 1.0]], [0.5]).tolist()  # half the tasks
+        [0.5]
+    """
+    if not tasks or any(not len(values) for values in tasks):
+        raise InvalidValueError(f"performance_profile needs at least one run in every task, got sizes {[len(t) for t in tasks]}")
+    taus = np.asarray(thresholds, dtype=float)
+    per_task = [(np.asarray(values, dtype=float)[None, :] > taus[:, None]).mean(axis=1) for values in tasks]
+    return np.mean(per_task, axis=0)

@@ -21,7 +21,7 @@ from torchrl_causal.algorithms import TABLE1_ROWS, Row
 from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.evaluation.runs import RunRecord, Setting
-from torchrl_causal.evaluation.seed_statistics import bootstrap_interval, interquartile_mean
+from torchrl_causal.evaluation.seed_statistics import bootstrap_interval, interquartile_mean, stratified_bootstrap_interval
 
 __all__ = [
     "TABLE1_ALGORITHMS",
@@ -46,6 +46,9 @@ __all__ = [
     "effect_checks",
     "seed_effect_checks",
     "effect_markdown",
+    "NormalisedScores",
+    "normalised_scores",
+    "aggregate_markdown",
 ]
 
 #: Table 1's row labels in its order (:data:`torchrl_causal.algorithms.TABLE1_ROWS`).
@@ -518,3 +521,83 @@ def seed_effect_checks(runs: Iterable[RunRecord], targets: EffectTargets = Effec
 
 def effect_markdown(checks: Sequence[EffectCheck]) -> str:
     return _markdown(["Claim", "Measured", "Holds"], [[c.claim, c.measured, "yes" if c.passed else "**no**"] for c in checks])
+
+
+@dataclass(frozen=True)
+class NormalisedScores:
+    """Each run's success rate divided by the expert's in its task and regime: the score
+    rliable-style aggregates (IQM, performance profile) take across tasks.
+
+    Attributes:
+        regime: the evaluation regime the scores come from.
+        scores: row label -> task (setting) -> one score per seed, seeds in ascending order.
+        left_out: the tasks that could not be normalised, with why (no expert run, or an
+            expert that never succeeded).
+    """
+
+    regime: str
+    scores: Mapping[str, Mapping[Setting, Sequence[float]]]
+    left_out: Mapping[Setting, str]
+
+    def tasks(self, label: str) -> list[Sequence[float]]:
+        """The scores of ``label`` grouped by task, as the stratified statistics take them."""
+        return list(self.scores[label].values())
+
+
+def normalised_scores(runs: Iterable[RunRecord], regime: str = "deploy") -> NormalisedScores:
+    """Per row and task (setting), each seed's ``regime`` success rate over the expert's
+    (pooled over the expert's runs of that setting, since the expert does not train); the
+    expert row itself is not scored.
+
+    Examples:
+        >>> from pathlib import Path
+        >>> def run(label, seed, successes, env="u"):
+        ...     result = EvaluationResult("deploy", successes, [0.0] * len(successes), [1] * len(successes))
+        ...     return RunRecord(Path(f"{env}/{label}/{seed}"), label, Setting(env, 400, 1.0, 2), seed, {"deploy": result})
+        >>> runs = [run("expert", 0, [True, True, True, False]), run("c_sqil", 0, [True, True, False, False]),
+        ...         run("c_sqil", 1, [True, True, True, False]), run("c_sqil", 0, [True], env="v")]
+        >>> scores = normalised_scores(runs)
+        >>> scores.tasks("c_sqil"), list(scores.left_out.values())
+        ([[0.6666666666666666, 1.0]], ['no expert run'])
+    """
+    runs = list(runs)
+    expert: dict[Setting, list[EvaluationResult]] = defaultdict(list)
+    for run in runs:
+        if run.label == "expert" and regime in run.evaluations:
+            expert[run.setting].append(run.evaluations[regime])
+    scored: dict[str, dict[Setting, list[float]]] = defaultdict(dict)
+    left_out: dict[Setting, str] = {}
+    for run in sorted(runs, key=lambda r: (r.label, r.setting, r.seed)):
+        if run.label == "expert" or regime not in run.evaluations:
+            continue
+        if not expert.get(run.setting):
+            left_out[run.setting] = "no expert run"
+            continue
+        reference = EvaluationResult.pool(expert[run.setting]).success_rate
+        if not reference:
+            left_out[run.setting] = "the expert never succeeded"
+            continue
+        scored[run.label].setdefault(run.setting, []).append(run.evaluations[regime].success_rate / reference)
+    return NormalisedScores(regime, {label: scored[label] for label in ordered_labels(scored)}, left_out)
+
+
+def aggregate_markdown(scores: NormalisedScores, digits: int = 2) -> str:
+    """Per row: the tasks and runs scored, the mean and the IQM of the normalised score with
+    the IQM's 95% stratified-bootstrap interval (runs resampled within each task;
+    :func:`~torchrl_causal.evaluation.seed_statistics.stratified_bootstrap_interval`)."""
+    header = ["Algorithm", "tasks", "runs", "mean", "IQM [95% stratified bootstrap CI]"]
+    rows = []
+    for label in scores.scores:
+        tasks = scores.tasks(label)
+        pooled = [x for task in tasks for x in task]
+        low, high = stratified_bootstrap_interval(tasks)
+        rows.append(
+            [
+                display_name(label),
+                str(len(tasks)),
+                str(len(pooled)),
+                f"{math.fsum(pooled) / len(pooled):.{digits}f}",
+                f"{interquartile_mean(pooled):.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]",
+            ]
+        )
+    return _markdown(header, rows)

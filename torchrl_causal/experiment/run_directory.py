@@ -68,6 +68,7 @@ __all__ = [
     "EVAL_DIR",
     "LOG_DIR",
     "TRAIN_CURVE",
+    "SUCCESS_CURVE",
     "RUNTIME_KEYS",
     "RUN_ENTRIES",
     "CheckpointError",
@@ -105,6 +106,9 @@ LOCK_FILE = ".lock"
 WANDB_DIR = "wandb"  # logger=wandb writes its offline runs here
 POLICY_DIGEST_FILE = "best.json"  # beside checkpoints/best.pt: what it was trained under (digests)
 TRAIN_CURVE = "eval/train_return"  # scalar logged at every periodic train-regime evaluation
+#: the success rate of a periodic evaluation in a regime (``eval/train_success`` is logged
+#: beside the training curve; a deploy one where a trainer evaluates in that regime too)
+SUCCESS_CURVE = "eval/{regime}_success"
 
 #: Every entry a run writes at the top of its directory: all that ``resume=false`` ever removes.
 RUN_ENTRIES: frozenset[str] = frozenset(
@@ -456,6 +460,10 @@ class RunDirectory:
     @property
     def train_curve_file(self) -> Path:
         return self.log_dir / "scalars" / f"{TRAIN_CURVE}.csv"
+
+    def success_curve_file(self, regime: str) -> Path:
+        """The periodic evaluations' success rates in ``regime`` (a CSVLogger scalar file)."""
+        return self.log_dir / "scalars" / f"{SUCCESS_CURVE.format(regime=regime)}.csv"
 
     @property
     def last_checkpoint(self) -> Path:
