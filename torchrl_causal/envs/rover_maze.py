@@ -30,9 +30,10 @@ needs about 310 steps on medium and 640 on large (see ``results/rover_speed.md``
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from functools import cache
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -40,7 +41,7 @@ from torchrl.data import Bounded, Unbounded
 
 from torchrl_causal.envs.base import GustConfoundedEnv
 from torchrl_causal.envs.maze_layout import MazeLayout
-from torchrl_causal.errors import InvalidValueError
+from torchrl_causal.errors import InvalidStateError, InvalidValueError
 
 if TYPE_CHECKING:
     from torchrl_causal.graphs import TimeSliceTemplate
@@ -183,7 +184,7 @@ def top_down_frames(
         ((2, 48, 64, 3), dtype('uint8'))
     """
     if width < 8 or height < 8:
-        raise ValueError(f"a frame needs width and height >= 8 pixels, got {width}x{height}")
+        raise InvalidValueError(f"a frame needs width and height >= 8 pixels, got {width}x{height}")
     rows, cols = layout.walls.shape
     scale = min(width / cols, height / rows) / layout.cell_size  # pixels per world unit
     # world (x, y) of every pixel centre; the maze is centred on the origin
@@ -312,9 +313,9 @@ class RoverMazeEnv(GustConfoundedEnv):
                 env has not been reset yet (there is no rover to draw).
         """
         if camera is not None:
-            raise ValueError(f"RoverMaze renders only its top-down view: camera must be None, got {camera!r}")
+            raise InvalidValueError(f"RoverMaze renders only its top-down view: camera must be None, got {camera!r}")
         if not hasattr(self, "position"):
-            raise ValueError("RoverMaze.render needs a rover: call reset() first")
+            raise InvalidStateError("RoverMaze.render needs a rover: call reset() first")
         frames = top_down_frames(
             self.layout,
             self.goal_position,
@@ -326,6 +327,13 @@ class RoverMazeEnv(GustConfoundedEnv):
             height=height,
         )
         return frames.reshape(*self.batch_size, height, width, 3)
+
+    @classmethod
+    def config_arguments(cls, config: Mapping[str, Any]) -> dict[str, Any]:
+        arguments = super().config_arguments(config)
+        if isinstance(arguments.get("params"), Mapping):
+            arguments["params"] = RoverParameters(**arguments["params"])
+        return arguments
 
     def _make_variable_specs(self):
         batch = self.batch_size
