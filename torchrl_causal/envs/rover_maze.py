@@ -41,7 +41,7 @@ from torchrl.data import Bounded, Unbounded
 
 from torchrl_causal.envs.base import GustConfoundedEnv
 from torchrl_causal.envs.maze_layout import MazeLayout
-from torchrl_causal.errors import InvalidStateError, InvalidValueError
+from torchrl_causal.errors import InvalidValueError
 
 if TYPE_CHECKING:
     from torchrl_causal.graphs import TimeSliceTemplate
@@ -315,7 +315,7 @@ class RoverMazeEnv(GustConfoundedEnv):
         if camera is not None:
             raise InvalidValueError(f"RoverMaze renders only its top-down view: camera must be None, got {camera!r}")
         if not hasattr(self, "position"):
-            raise InvalidStateError("RoverMaze.render needs a rover: call reset() first")
+            raise InvalidValueError("RoverMaze.render needs a rover: call reset() first")
         frames = top_down_frames(
             self.layout,
             self.goal_position,
