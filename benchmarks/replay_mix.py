@@ -14,13 +14,14 @@ Run (the figures in docs/design.md)::
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 import time
 
 import torch
 from tensordict import TensorDict
 from torchrl.data import LazyMemmapStorage, LazyTensorStorage, ReplayBufferEnsemble, TensorDictReplayBuffer
+
+from torchrl_causal.cli.arguments import OneLineParser, count
 
 
 def transitions(n: int, expert: bool, features: int = 355, actions: int = 8) -> TensorDict:
@@ -45,9 +46,9 @@ def timed(sample, reps: int) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--reps", type=int, default=2000)
-    parser.add_argument("--half", type=int, default=128)
+    parser = OneLineParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--reps", type=count, default=2000)
+    parser.add_argument("--half", type=count, default=128)
     args = parser.parse_args()
     torch.manual_seed(0)
     with tempfile.TemporaryDirectory() as scratch:

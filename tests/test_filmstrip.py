@@ -7,7 +7,7 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from torchrl_causal.envs import AntMazeEnv, RoverMazeEnv
+from torchrl_causal.envs import AntMazeEnv, RouteChoiceEnv
 from torchrl_causal.evaluation.rendering import record_filmstrip, save_filmstrips
 from torchrl_causal.experts import AntMazeExpert
 
@@ -46,9 +46,9 @@ def test_refuses_batches_and_envs_that_cannot_render():
     env = AntMazeEnv(maze="medium", batch_size=[2], seed=0)
     with pytest.raises(ValueError, match="batch size"):
         record_filmstrip(env, AntMazeExpert(env), max_steps=5)
-    rover = RoverMazeEnv(batch_size=[1], seed=0)
+    route_choice = RouteChoiceEnv(batch_size=(1,), seed=0)  # no renderer (RoverMaze has a top-down one)
     with pytest.raises(TypeError, match="cannot render"):
-        record_filmstrip(rover, lambda td: td, max_steps=5)
+        record_filmstrip(route_choice, lambda td: td, max_steps=5)
 
 
 def test_cli_draws_one_row_per_run_from_the_same_start(tmp_path, capsys):

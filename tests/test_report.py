@@ -401,11 +401,13 @@ def test_archive_cli_names_what_it_copied(paper_runs: Path, tmp_path_factory, ca
 
 
 def _tables(markdown: Path) -> list[str]:
-    """The table lines of a report, its across-seeds section (drawn from runs only) left out."""
-    lines, section = [], ""
+    """The table lines of a report, its across-seeds section and its across-tasks aggregate
+    (both drawn from runs only, which carried rows are not) left out."""
+    lines, section, part = [], "", ""
     for line in markdown.read_text().splitlines():
         section = line if line.startswith("### ") else section
-        if line.startswith("|") and section != "### Across seeds":
+        part = line if line.startswith("## ") else part
+        if line.startswith("|") and section != "### Across seeds" and not part.startswith("## Across tasks"):
             lines.append(line)
     return lines
 

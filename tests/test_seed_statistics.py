@@ -67,11 +67,12 @@ def test_sampled_bootstrap_approaches_the_exact_one(values) -> None:
 
 def _brute_force_stratified(tasks, confidence=0.95):
     """Every ordered resample of every task (prod n_i^n_i of them), the IQM of the pooled runs,
-    then numpy's percentiles."""
+    then the quantiles of that distribution (numpy's inverse of the distribution function,
+    averaged where it is flat at the level: the limit of the sampled percentiles)."""
     per_task = [list(itertools.product(values, repeat=len(values))) for values in tasks]
     stats = [interquartile_mean([x for resample in combination for x in resample]) for combination in itertools.product(*per_task)]
     tail = 100 * (1 - confidence) / 2
-    return tuple(np.percentile(stats, [tail, 100 - tail]))
+    return tuple(np.percentile(stats, [tail, 100 - tail], method="averaged_inverted_cdf"))
 
 
 @pytest.mark.parametrize("sizes", [(2, 3), (3, 3), (1, 4), (2, 2, 2)])

@@ -110,7 +110,7 @@ def test_report_of_trained_runs(trained_runs, tmp_path: Path) -> None:
     rows = report.csv.read_text().splitlines()
     assert rows[0] == "algorithm,regime,success_rate,success_se,return_mean,return_std,ep_len_mean,ep_len_std,n_episodes,seeds"
     assert len(rows) == 1 + 9 * 2
-    assert {p.name for p in report.figures} == {"u_training_curves.png", "u_trajectories.png"}
+    assert {p.name for p in report.figures} == {"u_training_curves.png", "u_success_curves.png", "u_trajectories.png"}
 
 
 def test_finished_run_is_not_retrained(trained_runs) -> None:

@@ -9,7 +9,7 @@ import torch
 
 iio = pytest.importorskip("imageio.v3", reason="the [video] extra is not installed")
 
-from torchrl_causal.envs import AntMazeEnv, RoverMazeEnv  # noqa: E402
+from torchrl_causal.envs import AntMazeEnv, RouteChoiceEnv  # noqa: E402
 from torchrl_causal.evaluation.video import VideoFile, record_video  # noqa: E402
 from torchrl_causal.experts import AntMazeExpert  # noqa: E402
 
@@ -54,6 +54,6 @@ def test_refuses_a_format_and_an_env_it_cannot_write(tmp_path) -> None:
     with pytest.raises(ValueError, match=r"must end in one of \['.mp4', '.gif'\]"):
         VideoFile(tmp_path / "episode.avi")
     with pytest.raises(TypeError, match="cannot render"):
-        record_video(RoverMazeEnv(batch_size=[1], seed=0), lambda td: td, tmp_path / "x.gif", max_steps=2)
+        record_video(RouteChoiceEnv(batch_size=(1,), seed=0), lambda td: td, tmp_path / "x.gif", max_steps=2)
     with pytest.raises(ValueError, match="even width and height"):
         VideoFile(tmp_path / "odd.mp4").log_video("odd", torch.zeros(1, 2, 3, 5, 5, dtype=torch.uint8))

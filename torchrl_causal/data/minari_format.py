@@ -53,7 +53,7 @@ from torchrl_causal.data.demonstrations import (
     load_demonstrations,
     read_metadata,
 )
-from torchrl_causal.errors import ExistingFileError
+from torchrl_causal.errors import ExistingFileError, InvalidValueError
 from torchrl_causal.extras import require_extra
 
 __all__ = [
@@ -158,7 +158,7 @@ def _rebuilt_env(config: Mapping[str, Any]) -> EnvBase:
     except (ImportError, ValueError, AttributeError):
         from_config = None
     if not callable(from_config):
-        raise ValueError(f"env class {name!r} is not importable or has no from_config")
+        raise InvalidValueError(f"env class {name!r} is not importable or has no from_config")
     return from_config(config, batch_size=(1,))
 
 

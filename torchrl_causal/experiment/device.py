@@ -129,7 +129,7 @@ def resolve_precision(value: Any) -> str:
         >>> resolve_precision("fp16")
         Traceback (most recent call last):
         ...
-        ValueError: precision='fp16' must be one of fp32, bf16
+        torchrl_causal.errors.InvalidValueError: precision='fp16' must be one of fp32, bf16
     """
     name = "fp32" if value is None else str(getattr(value, "value", value))  # a config's str enum, or a str
     if name not in PRECISIONS:
