@@ -22,7 +22,7 @@ from torchrl_causal.data import (  # noqa: E402
     load_minari_demonstrations,
     read_metadata,
 )
-from torchrl_causal.data.minari_format import from_minari_replay, read_minari_metadata  # noqa: E402
+from torchrl_causal.data.minari_format import action_space, from_minari_replay, read_minari_metadata  # noqa: E402
 from torchrl_causal.envs import RouteChoiceEnv, RouteChoiceExpert, RoverExpert, RoverMazeEnv  # noqa: E402
 from torchrl_causal.transforms import CausalWindowTransform  # noqa: E402
 
@@ -215,3 +215,78 @@ def test_a_run_refuses_a_minari_set_of_another_env_before_its_directory(tmp_path
     with pytest.raises(Exception, match=r"demos.source='hf:some/set' is not a source"):
         run(bad)
     assert not (tmp_path / "runs").exists()
+
+
+# ---------------------------------------------------------------- the action space
+
+
+def _exported_action_space(directory: Path):
+    import minari
+
+    return minari.MinariDataset(directory / "data").action_space
+
+
+def test_export_writes_the_env_action_bounds_and_every_action_lies_inside(exported):
+    ours, directory = exported
+    env = _env(1)
+    space = _exported_action_space(directory)
+    low, high = env.action_spec.space.low[0].numpy(), env.action_spec.space.high[0].numpy()
+    assert space.shape == tuple(env.action_spec.shape[1:])
+    assert (space.low == low).all() and (space.high == high).all()
+    assert float(low.min()) > -float("inf") and float(high.max()) < float("inf")
+    actions = load_minari_demonstrations(directory).get("action").numpy()
+    assert all(space.contains(action) for action in actions)
+    # the round trip is unchanged by the bounds: the actions come back bit-identical
+    assert torch.equal(torch.as_tensor(actions), load_demonstrations(ours).get("action"))
+
+
+def test_a_given_env_gives_the_bounds_and_must_be_the_recorded_one(exported, tmp_path):
+    ours, _ = exported
+    directory = export_minari(ours, "given-v0", root=tmp_path, env=_env(2))
+    assert _exported_action_space(directory) == _exported_action_space(exported[1])
+    with pytest.raises(DatasetError, match="env.maze"):
+        export_minari(ours, "other-v0", root=tmp_path, env=RoverMazeEnv(maze="medium", batch_size=(1,), horizon=300))
+    assert not (tmp_path / "other-v0").exists()
+
+
+def test_binary_actions_are_bounded_to_zero_one(tmp_path):
+    env = RouteChoiceEnv(batch_size=(4,), seed=0)
+    collect_demonstrations(env, RouteChoiceExpert(env), 6, tmp_path / "ours", seed=0, progress=False)
+    space = _exported_action_space(export_minari(tmp_path / "ours", "route-v0", root=tmp_path / "datasets"))
+    assert (space.low == 0).all() and (space.high == 1).all()
+    assert set(load_demonstrations(tmp_path / "ours").get("action").unique().tolist()) <= {0.0, 1.0}
+
+
+def test_a_set_whose_env_cannot_be_rebuilt_asks_for_it(exported, tmp_path):
+    import shutil
+
+    from torchrl_causal.data.demonstrations import dataset_checksum
+
+    ours = tmp_path / "ours"
+    shutil.copytree(exported[0], ours)
+    metadata = json.loads((ours / "metadata.json").read_text())
+    metadata["env"]["class"] = "somewhere.else.Env"
+    metadata["checksum"] = dataset_checksum(load_demonstrations(ours, verify_checksum=False), metadata)
+    (ours / "metadata.json").write_text(json.dumps(metadata))
+    with pytest.raises(DatasetError, match="pass env="):
+        export_minari(ours, "lost-v0", root=tmp_path / "datasets")
+    assert not (tmp_path / "datasets" / "lost-v0").exists()
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: RoverMazeEnv(maze="u", batch_size=(2,), regime="deploy", confounding_strength=0.5),
+        lambda: RouteChoiceEnv(batch_size=(2,), regime="deploy", confounding_strength=0.25),
+    ],
+)
+def test_an_env_rebuilt_from_its_config_records_the_same_config(make):
+    from torchrl_causal.envs.base import ConfoundedEnv
+
+    env = make()
+    rebuilt = ConfoundedEnv.from_config(env.config(), batch_size=(1,))
+    assert type(rebuilt) is type(env)
+    assert {**rebuilt.config(), "batch_size": None} == {**env.config(), "batch_size": None}
+    assert action_space(rebuilt.action_spec, (1,) if isinstance(env, RouteChoiceEnv) else (2,), torch.float32) == action_space(
+        env.action_spec, (1,) if isinstance(env, RouteChoiceEnv) else (2,), torch.float32
+    )

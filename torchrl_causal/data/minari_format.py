@@ -9,6 +9,9 @@ set of :mod:`~torchrl_causal.data.demonstrations`:
   and the confounder under ``"scm"`` (so a causal template can be applied again, or
   another adjustment chosen); a boolean variable is stored as ``uint8`` in ``[0, 1]``
   (Minari's and TorchRL's space converters know no boolean ``Box``);
+* ``action_space`` is a ``Box`` of the env's real action bounds, read from its action spec
+  (:func:`action_space`): ``[-1, 1]`` for the rover, the actuators' control ranges for the
+  MuJoCo agents, ``[0, 1]`` for a binary action;
 * the dataset metadata gets a ``"torchrl_causal"`` entry: the env config and regime the
   set was recorded in, the manifest (shape and dtype of every key) and the SHA-256
   checksum of :func:`~torchrl_causal.data.load_demonstrations`, so a Minari dataset is
@@ -37,6 +40,7 @@ from typing import Any
 import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Categorical, OneHot, TensorSpec
 from torchrl.envs import EnvBase
 
 from torchrl_causal.data.demonstrations import (
@@ -48,10 +52,12 @@ from torchrl_causal.data.demonstrations import (
     load_demonstrations,
     read_metadata,
 )
+from torchrl_causal.envs.base import ConfoundedEnv
 from torchrl_causal.extras import require_extra
 
 __all__ = [
     "METADATA_KEY",
+    "action_space",
     "export_minari",
     "from_minari_replay",
     "load_minari_demonstrations",
@@ -100,6 +106,64 @@ def _space(value: torch.Tensor) -> Any:
         return gym.spaces.Box(-np.inf, np.inf, shape=shape, dtype=np.float32 if value.dtype == torch.float32 else np.float64)
     info = np.iinfo(np.int64)
     return gym.spaces.Box(info.min, info.max, shape=shape, dtype=np.int64)
+
+
+def action_space(spec: TensorSpec, action_shape: tuple[int, ...], dtype: torch.dtype) -> Any:
+    """The gymnasium ``Box`` of the actions an env with action ``spec`` takes, for actions
+    stored with ``action_shape`` (one step, batch dimensions left out) and ``dtype``.
+
+    A bounded spec gives its bounds (the loosest over the env's batch), a categorical or
+    binary one ``[0, n - 1]``, a one-hot one ``[0, 1]``, any other ``(-inf, inf)``; a boolean
+    action is stored as ``uint8`` (as every boolean variable is).
+
+    Raises:
+        DatasetError: the spec's action shape is not ``action_shape``.
+
+    Examples:
+        >>> from torchrl.data import Binary, Bounded
+        >>> action_space(Bounded(-2.0, 3.0, shape=(4, 2)), (2,), torch.float32)
+        Box(-2.0, 3.0, (2,), float32)
+        >>> action_space(Binary(n=1, shape=(4, 1), dtype=torch.float32), (1,), torch.float32)
+        Box(0.0, 1.0, (1,), float32)
+    """
+    import gymnasium as gym
+
+    if tuple(spec.shape[len(spec.shape) - len(action_shape) :]) != action_shape:
+        raise DatasetError(f"the env's action spec has shape {tuple(spec.shape)}, the stored actions {action_shape} per step")
+    numpy_dtype = np.uint8 if dtype == torch.bool else torch.empty((), dtype=dtype).numpy().dtype
+    low = np.full(action_shape, -np.inf)
+    high = np.full(action_shape, np.inf)
+    space = spec.space
+    if isinstance(spec, OneHot):
+        low, high = np.zeros(action_shape), np.ones(action_shape)
+    elif isinstance(spec, Categorical):  # Binary included
+        low, high = np.zeros(action_shape), np.full(action_shape, float(space.n - 1))
+    elif hasattr(space, "low") and hasattr(space, "high"):
+        low = space.low.reshape(-1, *action_shape).amin(0).cpu().double().numpy()
+        high = space.high.reshape(-1, *action_shape).amax(0).cpu().double().numpy()
+    if not np.issubdtype(numpy_dtype, np.floating):
+        info = np.iinfo(numpy_dtype)
+        low, high = np.clip(low, info.min, info.max), np.clip(high, info.min, info.max)
+    return gym.spaces.Box(low.astype(numpy_dtype), high.astype(numpy_dtype), shape=action_shape, dtype=numpy_dtype)
+
+
+def _recorded_action_space(metadata: Mapping[str, Any], action: torch.Tensor, env: EnvBase | None, dataset: Path) -> Any:
+    """:func:`action_space` of ``env`` (checked to be the env the set records), or of the env
+    rebuilt from the set's record when no ``env`` is given."""
+    if env is not None:
+        check_expected(metadata, env_expectation(env), "")
+        return action_space(env.action_spec, tuple(action.shape[1:]), action.dtype)
+    try:
+        rebuilt = ConfoundedEnv.from_config(metadata["env"], batch_size=(1,))
+    except (KeyError, TypeError, ValueError) as error:
+        raise DatasetError(
+            f"the env of {dataset} cannot be rebuilt from its record ({error}) to read its action bounds: "
+            "pass env=<the env it was collected in>"
+        ) from error
+    try:
+        return action_space(rebuilt.action_spec, tuple(action.shape[1:]), action.dtype)
+    finally:
+        rebuilt.close()
 
 
 def _numpy(value: torch.Tensor) -> np.ndarray:
@@ -160,7 +224,9 @@ def _episode_buffers(data: TensorDictBase) -> Iterator[Any]:
         )
 
 
-def export_minari(dataset: str | os.PathLike, dataset_id: str, *, root: str | os.PathLike | None = None) -> Path:
+def export_minari(
+    dataset: str | os.PathLike, dataset_id: str, *, root: str | os.PathLike | None = None, env: EnvBase | None = None
+) -> Path:
     """Writes the demonstration set at ``dataset`` as the Minari dataset ``dataset_id``.
 
     Args:
@@ -169,12 +235,17 @@ def export_minari(dataset: str | os.PathLike, dataset_id: str, *, root: str | os
         dataset_id: a Minari id, ``[namespace/]name-v<version>``, e.g. ``"causal/rovermaze-u-v0"``.
         root: the Minari datasets folder (default: ``$MINARI_DATASETS_PATH`` or
             ``~/.minari/datasets``, where ``minari.load_dataset`` looks).
+        env: the env the set was collected in (its config is checked against the record),
+            whose action spec gives the dataset's ``action_space``; by default the env is
+            rebuilt from the set's record (:meth:`~torchrl_causal.envs.ConfoundedEnv.from_config`).
 
     Returns:
         The dataset's directory, ``<root>/<dataset_id>`` (what ``demos.source=minari:<path>`` takes).
 
     Raises:
         FileExistsError: a dataset with this id already exists under ``root``.
+        DatasetError: ``env`` is not the env the set records, or no ``env`` is given and
+            the recorded one cannot be rebuilt.
 
     Examples:
         >>> import tempfile
@@ -191,6 +262,8 @@ def export_minari(dataset: str | os.PathLike, dataset_id: str, *, root: str | os
         (2, True)
         >>> sorted(minari_set.observation_space.spaces)
         ['L', 'P', 'W', 'latent', 'scm', 'success']
+        >>> minari_set.action_space  # the rover's throttle and turn, each in [-1, 1]
+        Box(-1.0, 1.0, (2,), float32)
         >>> load_minari_demonstrations(exported, expected=env).shape == ours.shape
         True
     """
@@ -202,6 +275,7 @@ def export_minari(dataset: str | os.PathLike, dataset_id: str, *, root: str | os
     if target.exists():
         raise FileExistsError(f"a Minari dataset {dataset_id!r} already exists at {target}")
     minari.dataset.minari_dataset.parse_dataset_id(dataset_id)  # a malformed id fails before any work
+    actions = _recorded_action_space(metadata, data.get("action"), env, Path(dataset))
     # Written in a staging folder and moved into place whole: an interrupted export leaves nothing at target.
     root.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=".minari-export.", dir=root))
@@ -214,7 +288,7 @@ def export_minari(dataset: str | os.PathLike, dataset_id: str, *, root: str | os
                 dataset_id,
                 list(_episode_buffers(data)),
                 observation_space=_dict_space(_observations(data[:1])),
-                action_space=_space(data.get("action")),
+                action_space=actions,
                 algorithm_name=str(metadata.get("policy")),
                 author="torchrl-causal",
                 author_email="n/a",
@@ -347,8 +421,14 @@ def load_minari_demonstrations(
     *,
     verify_checksum: bool = True,
 ) -> TensorDict:
-    """Loads a Minari dataset (a path or an id) through TorchRL's ``MinariExperienceReplay``,
-    refusing it for the reasons :func:`~torchrl_causal.data.load_demonstrations` refuses ours.
+    """Loads a Minari dataset (a path or an id), refusing it for the reasons
+    :func:`~torchrl_causal.data.load_demonstrations` refuses ours.
+
+    The episodes are read with Minari's own reader (``minari.MinariDataset(...).iterate_episodes()``,
+    no network), laid out as TorchRL's ``MinariExperienceReplay`` lays them out
+    (:func:`replay_layout`) and mapped to our layout (:func:`from_minari_replay`).
+    ``MinariExperienceReplay`` itself is not used: in TorchRL 0.14.1 every value it returns
+    is zero (see :func:`replay_layout`); ``from_minari_replay`` takes its output once fixed.
 
     Args:
         source: the dataset's directory, or its id under ``$MINARI_DATASETS_PATH`` /

@@ -17,6 +17,7 @@ batched torch functions, so envs that simulate in numpy/MuJoCo can call them on 
 
 from __future__ import annotations
 
+import importlib
 import math
 from abc import abstractmethod
 from collections.abc import Mapping, Sequence
@@ -297,6 +298,41 @@ class ConfoundedEnv(EnvBase):
             "confounding_strength": self.confounding_strength,
             "horizon": self.horizon,
         }
+
+    #: keys of :meth:`config` that report a value derived from the others (not an argument).
+    derived_config_keys: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def config_arguments(cls, config: Mapping[str, Any]) -> dict[str, Any]:
+        """The constructor's keyword arguments that :meth:`config` recorded (``"class"`` and
+        :attr:`derived_config_keys` left out); a subclass that records an argument in another
+        form (a dataclass as a dict) turns it back here."""
+        return {key: value for key, value in config.items() if key not in ("class", *cls.derived_config_keys)}
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any], **overrides: Any) -> ConfoundedEnv:
+        """The env a :meth:`config` record describes, of the class it names (a subclass of
+        ``cls``), with ``overrides`` (e.g. ``batch_size=(1,)``) replacing recorded arguments.
+
+        Raises:
+            ValueError: the record names no importable subclass of ``cls``.
+
+        Examples:
+            >>> from torchrl_causal.envs import RoverMazeEnv
+            >>> env = RoverMazeEnv(maze="u", batch_size=(4,), horizon=300)
+            >>> rebuilt = ConfoundedEnv.from_config(env.config(), batch_size=(1,))
+            >>> type(rebuilt).__name__, rebuilt.maze, rebuilt.horizon, tuple(rebuilt.batch_size)
+            ('RoverMazeEnv', 'u', 300, (1,))
+        """
+        name = str(config.get("class", ""))
+        module, _, qualname = name.rpartition(".")
+        try:
+            target = getattr(importlib.import_module(module), qualname) if module else None
+        except (ImportError, AttributeError):
+            target = None
+        if not (isinstance(target, type) and issubclass(target, cls)):
+            raise ValueError(f"env config class {name!r} is not an importable {cls.__name__}")
+        return target(**{**target.config_arguments(config), **overrides})
 
     def get_extra_state(self) -> dict[str, Any]:
         """The generator's state and a copy of every :attr:`runtime_attributes` entry

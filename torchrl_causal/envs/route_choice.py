@@ -184,5 +184,8 @@ class RouteChoiceEnv(ConfoundedEnv):
             "scm": {"U": wind.clone()},
         }
 
+    #: reported by :meth:`config`, set by the regime and the strength
+    derived_config_keys = ("wind_probability",)
+
     def config(self) -> dict[str, object]:
         return {**super().config(), "wind_probability": str(self.wind_probability)}

@@ -30,9 +30,10 @@ needs about 310 steps on medium and 640 on large (see ``results/rover_speed.md``
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from functools import cache
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import torch
 from torchrl.data import Bounded, Unbounded
@@ -222,6 +223,13 @@ class RoverMazeEnv(GustConfoundedEnv):
 
     def config(self) -> dict[str, object]:
         return {**super().config(), "maze": self.maze, "params": asdict(self.params)}
+
+    @classmethod
+    def config_arguments(cls, config: Mapping[str, Any]) -> dict[str, Any]:
+        arguments = super().config_arguments(config)
+        if isinstance(arguments.get("params"), Mapping):
+            arguments["params"] = RoverParameters(**arguments["params"])
+        return arguments
 
     def _make_variable_specs(self):
         batch = self.batch_size
