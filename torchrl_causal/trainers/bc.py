@@ -98,6 +98,7 @@ class BCTrainer(Trainer):
             loss.backward()
             self.optimizer.step()
             losses.append(loss.detach())
+        self.updates_done += len(losses)
         val = self.validation_loss()
         if val < self.best_val_loss:
             self.best_val_loss, self.epochs_without_improvement = val, 0
