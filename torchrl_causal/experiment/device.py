@@ -22,7 +22,7 @@ from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.compat import dynamo_supported
 
-__all__ = ["DeviceCheck", "PolicyOnDevice", "compile_unavailable", "for_cpu_env", "resolve_device"]
+__all__ = ["DeviceCheck", "PolicyOnDevice", "SlurmCheck", "compile_unavailable", "for_cpu_env", "resolve_device"]
 
 CPU = torch.device("cpu")
 
@@ -114,6 +114,21 @@ class DeviceCheck(Callback):
             resolve_device(str(config.device))
         except ValueError as err:
             raise SystemExit(f"Error: {err}") from err
+
+
+class SlurmCheck(Callback):
+    """Hydra callback: a multirun through the SLURM launcher (``hydra/launcher=slurm``) is
+    refused in one line, before Hydra makes the sweep folder, on a machine without
+    ``sbatch``: submitit would fail later with a long traceback.
+    """
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        launcher = str(OmegaConf.select(config, "hydra.launcher._target_", default=""))
+        if "slurm" in launcher.lower() and shutil.which("sbatch") is None:
+            raise SystemExit(
+                "error: hydra/launcher=slurm submits each job with sbatch, which is not on PATH here: run the sweep "
+                "on the cluster's login node, or on this machine with hydra/launcher=processes"
+            )
 
 
 class PolicyOnDevice(TensorDictModuleBase):

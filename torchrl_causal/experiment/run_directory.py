@@ -31,6 +31,7 @@ killed run leaves no stale lock behind.
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import json
 import math
@@ -189,9 +190,19 @@ def atomic_write_text(path: Path, text: str) -> None:
 
 def atomic_save(obj: Any, path: Path) -> None:
     """``torch.save`` to a temporary file in the same folder, then rename over ``path``:
-    an interrupted save leaves the previous checkpoint intact."""
+    an interrupted save leaves the previous checkpoint intact.
+
+    Raises:
+        OSError: naming ``path``, when the file cannot be written (a full disk, a file size
+            limit): torch reports those as a ``RuntimeError`` that names no file.
+    """
     tmp = _temporary(path)
-    torch.save(obj, tmp)
+    try:
+        torch.save(obj, tmp)
+    except (OSError, RuntimeError) as error:
+        tmp.unlink(missing_ok=True)
+        reason = (str(error).splitlines() or [type(error).__name__])[0]
+        raise OSError(errno.EIO, f"cannot write this checkpoint (a full disk or a file size limit?): {reason}", str(path)) from error
     os.replace(tmp, path)
 
 
