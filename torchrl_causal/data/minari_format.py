@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from hydra.utils import get_class
 from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Categorical, OneHot, TensorSpec
 from torchrl.envs import EnvBase
@@ -52,7 +53,6 @@ from torchrl_causal.data.demonstrations import (
     load_demonstrations,
     read_metadata,
 )
-from torchrl_causal.envs.base import ConfoundedEnv
 from torchrl_causal.extras import require_extra
 
 __all__ = [
@@ -147,6 +147,20 @@ def action_space(spec: TensorSpec, action_shape: tuple[int, ...], dtype: torch.d
     return gym.spaces.Box(low.astype(numpy_dtype), high.astype(numpy_dtype), shape=action_shape, dtype=numpy_dtype)
 
 
+def _rebuilt_env(config: Mapping[str, Any]) -> EnvBase:
+    """The env a set records, of batch size 1, by its class's ``from_config`` (every
+    :class:`~torchrl_causal.envs.ConfoundedEnv` has one; the class is looked up by name, as
+    this data layer sits below the envs)."""
+    name = str(config.get("class", ""))
+    try:
+        from_config = getattr(get_class(name), "from_config", None)
+    except (ImportError, ValueError, AttributeError):
+        from_config = None
+    if not callable(from_config):
+        raise ValueError(f"env class {name!r} is not importable or has no from_config")
+    return from_config(config, batch_size=(1,))
+
+
 def _recorded_action_space(metadata: Mapping[str, Any], action: torch.Tensor, env: EnvBase | None, dataset: Path) -> Any:
     """:func:`action_space` of ``env`` (checked to be the env the set records), or of the env
     rebuilt from the set's record when no ``env`` is given."""
@@ -154,7 +168,7 @@ def _recorded_action_space(metadata: Mapping[str, Any], action: torch.Tensor, en
         check_expected(metadata, env_expectation(env), "")
         return action_space(env.action_spec, tuple(action.shape[1:]), action.dtype)
     try:
-        rebuilt = ConfoundedEnv.from_config(metadata["env"], batch_size=(1,))
+        rebuilt = _rebuilt_env(metadata["env"])
     except (KeyError, TypeError, ValueError) as error:
         raise DatasetError(
             f"the env of {dataset} cannot be rebuilt from its record ({error}) to read its action bounds: "
@@ -237,7 +251,7 @@ def export_minari(
             ``~/.minari/datasets``, where ``minari.load_dataset`` looks).
         env: the env the set was collected in (its config is checked against the record),
             whose action spec gives the dataset's ``action_space``; by default the env is
-            rebuilt from the set's record (:meth:`~torchrl_causal.envs.ConfoundedEnv.from_config`).
+            rebuilt from the set's record (its class's ``from_config``, e.g. :meth:`~torchrl_causal.envs.ConfoundedEnv.from_config`).
 
     Returns:
         The dataset's directory, ``<root>/<dataset_id>`` (what ``demos.source=minari:<path>`` takes).

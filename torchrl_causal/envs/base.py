@@ -17,7 +17,6 @@ batched torch functions, so envs that simulate in numpy/MuJoCo can call them on 
 
 from __future__ import annotations
 
-import importlib
 import math
 from abc import abstractmethod
 from collections.abc import Mapping, Sequence
@@ -25,6 +24,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import torch
+from hydra.utils import get_class
 from tensordict import TensorDict, TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.data import Binary, Composite, TensorSpec, Unbounded
@@ -325,10 +325,9 @@ class ConfoundedEnv(EnvBase):
             ('RoverMazeEnv', 'u', 300, (1,))
         """
         name = str(config.get("class", ""))
-        module, _, qualname = name.rpartition(".")
         try:
-            target = getattr(importlib.import_module(module), qualname) if module else None
-        except (ImportError, AttributeError):
+            target = get_class(name)
+        except (ImportError, ValueError, AttributeError):
             target = None
         if not (isinstance(target, type) and issubclass(target, cls)):
             raise ValueError(f"env config class {name!r} is not an importable {cls.__name__}")
