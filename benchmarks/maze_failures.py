@@ -24,7 +24,8 @@ import torch
 from tensordict.nn import InteractionType, set_interaction_type
 
 from torchrl_causal.cli.arguments import OneLineParser, count, non_negative, positive_number
-from torchrl_causal.envs import HumanoidMazeEnv, MazePlanner
+from torchrl_causal.envs import HumanoidMazeEnv
+from torchrl_causal.experts import MazePlanner
 from torchrl_causal.lifecycle import open_run
 
 CLASSES = ("success", "down", "stopped_short", "wrong_corridor", "on_route")
