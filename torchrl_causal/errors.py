@@ -33,6 +33,7 @@ __all__ = [
     "MissingAttributeError",
     "MissingDependencyError",
     "MissingFileError",
+    "RenderingUnavailable",
     "TorchRLCausalError",
     "UnknownKeyError",
 ]
@@ -48,6 +49,12 @@ class InvalidValueError(TorchRLCausalError, ValueError):
 
 class InvalidTypeError(TorchRLCausalError, TypeError):
     """An object of a kind the call cannot use (an env of another family, a body of another shape)."""
+
+
+class RenderingUnavailable(InvalidTypeError):
+    """No frames can be drawn: the env has no renderer (Route Choice), or no offscreen GL
+    context opens for a MuJoCo scene (a headless machine without EGL or OSMesa). A
+    ``TypeError`` too, as it always was."""
 
 
 class InvalidStateError(TorchRLCausalError, RuntimeError):

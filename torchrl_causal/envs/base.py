@@ -57,6 +57,7 @@ __all__ = [
     "GustConfoundedEnv",
     "GustProcess",
     "PartialStepError",
+    "batch_rows",
     "rotate",
 ]
 
@@ -255,6 +256,29 @@ def validate_batch_size(batch_size: object) -> tuple[int, ...]:
     if not all(isinstance(d, int) and not isinstance(d, bool) and d >= 0 for d in dims):
         raise EnvArgumentError(f"batch_size must be an int >= 0 or a sequence of them, got {batch_size!r}")
     return tuple(int(d) for d in dims)
+
+
+def batch_rows(size: int, rows: Sequence[int] | None) -> list[int]:
+    """The flat batch indices a ``render(rows=...)`` draws: ``rows`` checked against a batch
+    of ``size`` elements, every row for ``None``.
+
+    Raises:
+        InvalidValueError: a row outside ``range(size)``, named.
+
+    Examples:
+        >>> batch_rows(3, None), batch_rows(3, [2, 0])
+        ([0, 1, 2], [2, 0])
+        >>> batch_rows(3, [3])
+        Traceback (most recent call last):
+        ...
+        torchrl_causal.errors.InvalidValueError: render row 3 is outside the batch of 3 elements
+    """
+    if rows is None:
+        return list(range(size))
+    for row in rows:
+        if isinstance(row, bool) or not isinstance(row, int) or not 0 <= row < size:
+            raise InvalidValueError(f"render row {row!r} is outside the batch of {size} elements")
+    return list(rows)
 
 
 def _validate_horizon(horizon: int) -> int:

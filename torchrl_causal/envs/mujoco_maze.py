@@ -31,9 +31,9 @@ from tensordict.utils import NestedKey
 from torchrl.data import Bounded, TensorSpec, Unbounded
 
 from torchrl_causal.available import available_memory
-from torchrl_causal.envs.base import EnvArgumentError, GustConfoundedEnv, Regime, validate_batch_size
+from torchrl_causal.envs.base import EnvArgumentError, GustConfoundedEnv, Regime, batch_rows, validate_batch_size
 from torchrl_causal.envs.maze_layout import MAZE_MAPS, MazeLayout
-from torchrl_causal.errors import InvalidStateError, InvalidValueError
+from torchrl_causal.errors import InvalidValueError, RenderingUnavailable
 
 __all__ = ["MAZE_HEIGHT", "MAZE_SIZE_SCALING", "BatchedSimulation", "MazeSimulator", "MazeTask", "MujocoMazeEnv", "OffscreenRenderer"]
 
@@ -104,7 +104,7 @@ class OffscreenRenderer:
             ``<visual><global offwidth offheight>``).
 
     Raises:
-        RuntimeError: when no GL context can be created, naming the packages to install.
+        RenderingUnavailable: when no GL context can be created, naming the packages to install.
     """
 
     def __init__(self, model: mujoco.MjModel, *, width: int, height: int) -> None:
@@ -117,7 +117,7 @@ class OffscreenRenderer:
             self._context.make_current()
             self._mjr = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
         except Exception as err:  # ImportError, RuntimeError or mujoco.FatalError, by backend
-            raise InvalidStateError(
+            raise RenderingUnavailable(
                 f"offscreen rendering is unavailable (MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}): {err}. "
                 "Headless Linux needs EGL (Debian: libegl1 libegl-mesa0 libgl1-mesa-dri) or "
                 "MUJOCO_GL=osmesa (Debian: libosmesa6)."
@@ -539,15 +539,22 @@ class MujocoMazeEnv(GustConfoundedEnv):
     def config(self) -> dict[str, object]:
         return {**super().config(), "maze": self.maze, "success_radius": self.success_radius}
 
-    def render(self, *, width: int = 320, height: int = 320, camera: str | None = None) -> np.ndarray:
+    def render(self, *, width: int = 320, height: int = 320, camera: str | None = None, rows: Sequence[int] | None = None) -> np.ndarray:
         """RGB frames of every batch element, ``batch + (height, width, 3)`` uint8, offscreen.
 
         ``camera`` names a camera of the agent's MJCF (e.g. ``"track"`` for the ant,
         ``"back"`` for the humanoid); the default looks straight down on the whole maze.
+        ``rows`` (flat batch indices) draws only those simulations, ``(len(rows), height, width, 3)``.
+        Drawing reads the simulations' poses and draws no random number.
+
+        Raises:
+            RenderingUnavailable: no offscreen GL context opens on this machine.
         """
+        index = batch_rows(self.simulator.num_envs, rows)
         view = self.simulator.overview_camera() if camera is None else self.simulator.camera(camera)
-        frames = [self.simulator.render(i, width=width, height=height, camera=view) for i in range(self.simulator.num_envs)]
-        return np.stack(frames).reshape(*self.batch_size, height, width, 3)
+        frames = [self.simulator.render(i, width=width, height=height, camera=view) for i in index]
+        frames = np.stack(frames) if frames else np.empty((0, height, width, 3), dtype=np.uint8)
+        return frames if rows is not None else frames.reshape(*self.batch_size, height, width, 3)
 
     def close(self, *, raise_if_closed: bool = True) -> None:
         self.simulator.close()

@@ -30,7 +30,7 @@ needs about 310 steps on medium and 640 on large (see ``results/rover_speed.md``
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from functools import cache
 from typing import TYPE_CHECKING, Any
@@ -39,7 +39,7 @@ import numpy as np
 import torch
 from torchrl.data import Bounded, Unbounded
 
-from torchrl_causal.envs.base import GustConfoundedEnv
+from torchrl_causal.envs.base import GustConfoundedEnv, batch_rows
 from torchrl_causal.envs.maze_layout import MazeLayout
 from torchrl_causal.errors import InvalidValueError
 
@@ -303,30 +303,34 @@ class RoverMazeEnv(GustConfoundedEnv):
     def config(self) -> dict[str, object]:
         return {**super().config(), "maze": self.maze, "params": asdict(self.params)}
 
-    def render(self, *, width: int = 320, height: int = 320, camera: str | None = None) -> np.ndarray:
+    def render(self, *, width: int = 320, height: int = 320, camera: str | None = None, rows: Sequence[int] | None = None) -> np.ndarray:
         """Top-down RGB frames of every batch element, ``batch + (height, width, 3)`` uint8
         (:func:`top_down_frames`: walls, goal, the rover's footprint and heading), drawn
-        with torch on the CPU: no GL context needed.
+        with torch on the CPU: no GL context needed, no random number drawn.
+
+        ``rows`` (flat batch indices) draws only those elements, ``(len(rows), height, width, 3)``:
+        a video of a few episodes of a wide evaluation batch draws only them.
 
         Raises:
-            ValueError: ``camera`` is given (the rover has only the top-down view), or the
-                env has not been reset yet (there is no rover to draw).
+            ValueError: ``camera`` is given (the rover has only the top-down view), the env
+                has not been reset yet (there is no rover to draw), or a row is out of the batch.
         """
         if camera is not None:
             raise InvalidValueError(f"RoverMaze renders only its top-down view: camera must be None, got {camera!r}")
         if not hasattr(self, "position"):
             raise InvalidValueError("RoverMaze.render needs a rover: call reset() first")
+        index = batch_rows(self.batch_size.numel(), rows)
         frames = top_down_frames(
             self.layout,
             self.goal_position,
             self.params.goal_radius,
-            self.position.reshape(-1, 2),
-            self.heading.reshape(-1),
+            self.position.reshape(-1, 2)[index],
+            self.heading.reshape(-1)[index],
             self.params.half_size,
             width=width,
             height=height,
         )
-        return frames.reshape(*self.batch_size, height, width, 3)
+        return frames if rows is not None else frames.reshape(*self.batch_size, height, width, 3)
 
     @classmethod
     def config_arguments(cls, config: Mapping[str, Any]) -> dict[str, Any]:

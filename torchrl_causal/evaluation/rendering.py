@@ -17,14 +17,18 @@ import torch  # noqa: E402
 from torchrl.envs import EnvBase, TransformedEnv  # noqa: E402
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp  # noqa: E402
 
-from torchrl_causal.errors import InvalidValueError, TorchRLCausalError
+from torchrl_causal.errors import InvalidValueError, RenderingUnavailable
 from torchrl_causal.evaluation.metrics import Policy  # noqa: E402
 
-__all__ = ["EpisodeOutcome", "Filmstrip", "RenderingUnavailable", "record_filmstrip", "rendered_episode", "save_filmstrips"]
-
-
-class RenderingUnavailable(TorchRLCausalError, TypeError):
-    """The env draws no frames (it is not a MuJoCo scene); a ``TypeError`` too, as it always was."""
+__all__ = [
+    "EpisodeOutcome",
+    "Filmstrip",
+    "RenderingUnavailable",
+    "record_filmstrip",
+    "renderable_scene",
+    "rendered_episode",
+    "save_filmstrips",
+]
 
 
 @dataclass(frozen=True)
@@ -37,12 +41,18 @@ class Filmstrip:
     length: int
 
 
-def _renderable(env: EnvBase) -> EnvBase:
+def renderable_scene(env: EnvBase) -> EnvBase:
+    """The env that draws ``env``'s frames: ``env`` itself, or the base env under a
+    ``TransformedEnv`` (the imitator's view renders the scene it acts in).
+
+    Raises:
+        RenderingUnavailable: the env has no ``render`` method.
+    """
     base = env.base_env if isinstance(env, TransformedEnv) else env
     if not callable(getattr(base, "render", None)):
         raise RenderingUnavailable(
-            f"{type(base).__name__} cannot render frames (no render method): filmstrips need a "
-            "run on a MuJoCo maze env (antmaze_*, humanoidmaze_*)"
+            f"{type(base).__name__} cannot render frames (no render method): videos and filmstrips need a "
+            "maze env (rovermaze_*, antmaze_*, humanoidmaze_*)"
         )
     return base
 
@@ -92,7 +102,7 @@ def rendered_episode(
         raise InvalidValueError(f"recording needs an env with batch size (1,), got {tuple(env.batch_size)}")
     if every < 1 or max_steps < 1:
         raise InvalidValueError(f"need every >= 1 and max_steps >= 1, got {every}, {max_steps}")
-    scene = _renderable(env)
+    scene = renderable_scene(env)
     outcome = EpisodeOutcome() if outcome is None else outcome
 
     def render() -> np.ndarray:
