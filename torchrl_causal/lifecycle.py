@@ -30,7 +30,8 @@ from torchrl_causal.data.demonstrations import DatasetError
 from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.metrics import EvaluationResult
-from torchrl_causal.experiment.builders import check_demonstrations, make_window
+from torchrl_causal.evaluation.video import check_can_record
+from torchrl_causal.experiment.builders import check_demonstrations, make_env, make_window
 from torchrl_causal.experiment.config import register_resolvers
 from torchrl_causal.experiment.device import resolve_device
 from torchrl_causal.experiment.interrupts import RunInterrupted, signals_raise
@@ -47,6 +48,7 @@ __all__ = [
     "EVALUATED_DIR",
     "PACKAGE_RESULTS",
     "REGIMES",
+    "VIDEO_DIR",
     "evaluate_run",
     "evaluation_home",
     "evaluation_record",
@@ -60,6 +62,7 @@ log = logging.getLogger("torchrl_causal")
 register_resolvers()
 
 REGIMES = ("train", "deploy")
+VIDEO_DIR = "videos"  # <run_dir>/logs/videos/<regime>/episode_<i>.<format> (eval.video)
 
 
 @contextmanager
@@ -101,6 +104,7 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
 
     Raises:
         ConfigValueError: a value out of range (nothing is written).
+        RenderingUnavailable: ``eval.video`` asks for videos of an env this machine cannot draw (nothing is written).
         DatasetError: demonstrations of another env, missing keys or corrupted (nothing is written).
         ConfigMismatchError: ``cfg.run_dir`` holds a run of another config (nothing is written).
         ForeignFilesError: ``cfg.run_dir`` holds files no run wrote (nothing is written or removed).
@@ -112,6 +116,8 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
     _check_run_root(Path(cfg.run_dir))
     RunDirectory(cfg.run_dir).check_owned()  # a folder of the user's own files is neither cleared nor written into
     check_run_fits(cfg)  # before the window: a long one takes long to build
+    if cfg.eval.video:
+        _check_videos(cfg)  # before training: a machine that cannot draw the env refuses now, not hours later
     trainer_class: type[Trainer] | None = get_class(cfg.algo.trainer) if cfg.algo.trainer else None
     total = trainer_class.budget(cfg) if trainer_class else 0
     window = make_window(cfg) if trainer_class else None
@@ -129,6 +135,19 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
             run_dir.discard()
             created = created or run_dir.path
         return _claim_and_run(cfg, run_dir, trainer_class, window, total, created, clock)
+
+
+def _check_videos(cfg: DictConfig) -> None:
+    """Draws one small frame of the run's env (``eval.video`` asks for videos).
+
+    Raises:
+        RenderingUnavailable: the env has no renderer, or no GL context opens for it.
+    """
+    env = make_env(cfg, "train", 1, 0)
+    try:
+        check_can_record(env)
+    finally:
+        env.close()
 
 
 def _remove_new_run(run_dir: RunDirectory, created: Path) -> None:
@@ -211,7 +230,7 @@ def _train_and_evaluate(
         trainer.fit()
         policy = trainer.best_policy()
     with timed("evaluation"):
-        results = evaluator.final(policy)
+        results = evaluator.final(policy, video_dir=run_dir.log_dir / VIDEO_DIR if cfg.eval.video else None)
     for regime, result in results.items():
         run_dir.write_json(run_dir.eval_path(regime), evaluator.record(result))
         log.info(

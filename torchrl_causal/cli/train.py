@@ -22,6 +22,7 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
 from torchrl_causal.cli.arguments import one_line_errors, refuse_repeated_keys
+from torchrl_causal.errors import RenderingUnavailable
 from torchrl_causal.experiment.config import CONFIG_NAME, CONFIG_PATH
 from torchrl_causal.experiment.interrupts import RunInterrupted
 from torchrl_causal.experiment.run_directory import CheckpointError, RunInUseError
@@ -35,7 +36,7 @@ def main(cfg: DictConfig) -> float:
     """Runs one job; returns its deploy-regime success rate (what a sweeper would optimise)."""
     try:
         # (a Ctrl-C before the run's own handlers, while checking or building the window, is entry_point's)
-        with one_line_errors(CheckpointError, RunInUseError):
+        with one_line_errors(CheckpointError, RunInUseError, RenderingUnavailable):
             results = run(cfg)
     except RunInterrupted as stop:
         command = " ".join(["python -m torchrl_causal.train", *HydraConfig.get().overrides.task])

@@ -12,17 +12,20 @@ for evaluations with other settings.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any
 
 import torch
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs import EnvBase
 
-from torchrl_causal.evaluation.metrics import EvaluationResult, Policy, evaluate_policy
+from torchrl_causal.evaluation.metrics import EpisodeObserver, EvaluationResult, Policy, evaluate_policy
+from torchrl_causal.evaluation.video import EpisodeVideos
 from torchrl_causal.experiment.builders import make_env, make_expert, make_imitator_env, make_policy
 from torchrl_causal.experiment.device import for_cpu_env, resolve_device
 from torchrl_causal.experiment.run_directory import CONFIG_FILE, WINDOW_FILE, CheckpointError, RunDirectory
+from torchrl_causal.experiment.schema import EVAL_VIDEO_SIZE, VideoFormat
 from torchrl_causal.graphs.window import AdjustmentWindow
 
 __all__ = ["Evaluator", "maze_geometry", "PERIODIC_EVAL_SEED", "FINAL_EVAL_SEED"]
@@ -108,10 +111,19 @@ class Evaluator:
         return make_expert(self.cfg, env) if policy is None else policy
 
     def evaluate(
-        self, policy: Policy | None, regime: str, episodes: int, seed: int, *, trajectories: int = 0, num_envs: int | None = None
+        self,
+        policy: Policy | None,
+        regime: str,
+        episodes: int,
+        seed: int,
+        *,
+        trajectories: int = 0,
+        num_envs: int | None = None,
+        observer: EpisodeObserver | None = None,
     ) -> EvaluationResult:
         """Runs ``policy`` in eval mode (no dropout, deterministic actions) for ``episodes``
-        episodes in batches of ``num_envs`` (default ``cfg.eval.num_envs``).
+        episodes in batches of ``num_envs`` (default ``cfg.eval.num_envs``); ``observer``
+        watches them (e.g. records videos) without changing them.
 
         ``policy=None`` evaluates the env's expert, built for each evaluation env (it
         reads that env's latent state). A policy whose parameters live off the CPU acts
@@ -134,6 +146,7 @@ class Evaluator:
                 position_key=self.cfg.env.position_key,
                 trajectories=trajectories,
                 progress=self.progress,
+                observer=observer,
             )
         finally:
             if module is not None:
@@ -145,9 +158,11 @@ class Evaluator:
         episodes, the same ones every time)."""
         return self.evaluate(policy, "train", self.cfg.eval.episodes, PERIODIC_EVAL_SEED + self.cfg.seed)
 
-    def final(self, policy: Policy | None) -> dict[str, EvaluationResult]:
+    def final(self, policy: Policy | None, video_dir: Path | None = None) -> dict[str, EvaluationResult]:
         """Both regimes on ``cfg.eval.final_episodes`` episodes, ``cfg.eval.trajectories``
-        deploy-regime positions kept for the figure."""
+        deploy-regime positions kept for the figure; with ``video_dir``, the first
+        ``cfg.eval.video`` episodes of each regime recorded to ``<video_dir>/<regime>/``
+        (the results are the same with or without them)."""
         return {
             regime: self.evaluate(
                 policy,
@@ -155,9 +170,25 @@ class Evaluator:
                 self.cfg.eval.final_episodes,
                 FINAL_EVAL_SEED + 1000 * offset + self.cfg.seed,
                 trajectories=self.cfg.eval.trajectories,
+                observer=self.videos(video_dir / regime) if video_dir is not None else None,
             )
             for offset, regime in enumerate(REGIMES)
         }
+
+    def videos(self, folder: Path) -> EpisodeVideos | None:
+        """The recorder of ``cfg.eval.video`` episodes into ``folder`` (``None`` when the
+        config asks for none)."""
+        count = int(OmegaConf.select(self.cfg, "eval.video", default=0) or 0)
+        if not count:
+            return None
+        return EpisodeVideos(
+            folder,
+            count,
+            fmt=VideoFormat(OmegaConf.select(self.cfg, "eval.video_format", default="mp4")).value,
+            every=int(OmegaConf.select(self.cfg, "eval.video_every", default=1)),
+            width=EVAL_VIDEO_SIZE,
+            height=EVAL_VIDEO_SIZE,
+        )
 
     def record(self, result: EvaluationResult) -> dict[str, Any]:
         """The JSON record of ``result`` (with the maze geometry)."""

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import torch
 from tensordict import TensorDictBase
@@ -23,7 +23,7 @@ from torchrl_causal.envs.base import STEP_MASK_KEY
 from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.progress import progress as progress_reporter
 
-__all__ = ["EvaluationResult", "evaluate_policy"]
+__all__ = ["EpisodeObserver", "EvaluationResult", "evaluate_policy"]
 
 Policy = Callable[[TensorDictBase], TensorDictBase]
 
@@ -37,6 +37,27 @@ def _mean_std(values: Sequence[float]) -> tuple[float, float]:
         return math.nan, math.nan
     tensor = torch.tensor(values, dtype=torch.float64)
     return tensor.mean().item(), tensor.std(unbiased=False).item()
+
+
+class EpisodeObserver(Protocol):
+    """Watches the episodes of :func:`evaluate_policy` as they run (a video recorder), and
+    must change nothing in them: it may read the env's state (render it), never step,
+    reset or seed it, nor draw from its random generator.
+
+    Calls, for every round of ``env.batch_size`` parallel episodes: :meth:`on_reset` after
+    the reset, :meth:`on_step` after every step, :meth:`on_round_end` once all are done.
+    """
+
+    def on_reset(self, env: EnvBase, episodes: range) -> None:
+        """A round started: batch row ``i`` plays episode ``episodes[i]`` (the rows past
+        ``len(episodes)`` run too, but are not counted)."""
+
+    def on_step(self, env: EnvBase, stepped: torch.Tensor, ended: torch.Tensor) -> None:
+        """The rows in ``stepped`` (a flat bool mask over the batch) took a step; ``ended``
+        marks those whose episode ended with it (done, or at ``max_steps``)."""
+
+    def on_round_end(self) -> None:
+        """Every counted episode of the round has ended."""
 
 
 @dataclass(frozen=True)
@@ -188,6 +209,7 @@ def evaluate_policy(
     trajectories: int = 0,
     progress: bool = False,
     skip_finished: bool = True,
+    observer: EpisodeObserver | None = None,
 ) -> EvaluationResult:
     """Runs ``episodes`` complete episodes of ``policy`` in the batched ``env``.
 
@@ -220,6 +242,9 @@ def evaluate_policy(
         progress: report progress over episodes (a bar on a terminal, else log lines).
         skip_finished: stop stepping the envs whose episode ended (``False``: step every
             env until the round's last episode ends).
+        observer: told of every reset and step (:class:`EpisodeObserver`; e.g.
+            :class:`~torchrl_causal.evaluation.video.EpisodeVideos`); the episodes and the
+            result are the same with or without it.
 
     Examples:
         >>> from torchrl_causal.envs import RouteChoiceEnv
@@ -243,13 +268,15 @@ def evaluate_policy(
     with set_exploration_type(ExplorationType.DETERMINISTIC):
         while len(successes) < episodes:
             td = env.reset()
+            if observer is not None:
+                observer.on_reset(env, range(len(successes), min(len(successes) + width, episodes)))
             alive = torch.ones(width, dtype=torch.bool)
             episode_return = torch.zeros(width, dtype=torch.float64)
             length = torch.zeros(width, dtype=torch.int64)
             success = torch.zeros(width, dtype=torch.bool)
             keep = min(trajectories - len(paths), width) if position_key is not None else 0
             track = [[td[position_key][i, :2].tolist()] for i in range(keep)]
-            for _ in range(max_steps):
+            for step in range(1, max_steps + 1):
                 td = policy(td)
                 if skip_finished:
                     td.set(STEP_MASK_KEY, alive.clone())
@@ -261,10 +288,15 @@ def evaluate_policy(
                 for i in range(keep):
                     if alive[i]:
                         track[i].append(nxt[position_key][i, :2].tolist())
-                alive &= ~nxt["done"].reshape(width)
+                done = nxt["done"].reshape(width)
+                if observer is not None:
+                    observer.on_step(env, alive.clone(), alive & (done | (step == max_steps)))
+                alive &= ~done
                 if not alive.any():
                     break
                 td = step_mdp(td, keep_other=True)
+            if observer is not None:
+                observer.on_round_end()
             take = min(width, episodes - len(successes))
             successes += success[:take].tolist()
             returns += episode_return[:take].tolist()

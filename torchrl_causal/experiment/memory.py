@@ -40,7 +40,7 @@ from torchrl.data import Composite, TensorSpec
 
 from torchrl_causal.available import available_memory
 from torchrl_causal.experiment.builders import make_env, make_imitator_env, make_window
-from torchrl_causal.experiment.schema import ConfigValueError, GAILConfig, OffPolicyConfig, algo_schema_of
+from torchrl_causal.experiment.schema import EVAL_VIDEO_SIZE, ConfigValueError, GAILConfig, OffPolicyConfig, algo_schema_of
 
 __all__ = [
     "GB",
@@ -140,6 +140,16 @@ def encoded_transition_bytes(cfg: DictConfig) -> int:
     return high + (high - low) * (k - EXACT_K) // (EXACT_K - EXACT_K // 2)
 
 
+def _video_bytes(cfg: DictConfig) -> dict[str, int]:
+    """The frames of the final evaluation's videos, held until each episode ends (twice
+    while one is written): the episodes of one round, every ``eval.video_every``-th step."""
+    count = min(int(OmegaConf.select(cfg, "eval.video", default=0) or 0), cfg.eval.num_envs, cfg.eval.final_episodes)
+    if not count:
+        return {}
+    frames = cfg.env.horizon // int(OmegaConf.select(cfg, "eval.video_every", default=1)) + 2
+    return {"evaluation videos (eval.video x env.horizon / eval.video_every frames)": 2 * count * frames * EVAL_VIDEO_SIZE**2 * 3}
+
+
 def run_footprint(cfg: DictConfig) -> Footprint:
     """The dominant arrays of a run of ``cfg`` (validated)."""
     base = make_env(cfg, "train", 1, cfg.seed)
@@ -148,7 +158,8 @@ def run_footprint(cfg: DictConfig) -> Footprint:
     finally:
         base.close()
     if not cfg.algo.trainer:  # the expert row only evaluates
-        return Footprint(ram={"libraries": LIBRARIES_BYTES, "evaluation envs (eval.num_envs)": 4 * cfg.eval.num_envs * raw_step}, disk={})
+        ram = {"libraries": LIBRARIES_BYTES, "evaluation envs (eval.num_envs)": 4 * cfg.eval.num_envs * raw_step}
+        return Footprint(ram={**ram, **_video_bytes(cfg)}, disk={})
     step = encoded_transition_bytes(cfg)
     algo, schema = cfg.algo, algo_schema_of(cfg)
     demos = _demonstration_transitions(cfg)
@@ -159,6 +170,7 @@ def run_footprint(cfg: DictConfig) -> Footprint:
         "encoded demonstrations (demos.episodes x env.horizon x window.k)": 2 * demos * step,
         # the env's step and the window's lag ring, a few copies per step
         "evaluation envs (eval.num_envs x window.k)": 4 * cfg.eval.num_envs * step,
+        **_video_bytes(cfg),
     }
     disk = {} if Path(cfg.demos.path).exists() else {"demonstration set (demos.episodes x env.horizon)": demos * raw_step}
     if issubclass(schema, OffPolicyConfig):

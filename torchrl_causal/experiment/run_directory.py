@@ -134,6 +134,10 @@ RUNTIME_KEYS: tuple[str, ...] = (
     "run_name",
     "run_dir",
     "demos.path",
+    # videos of the final evaluation: its records are the same with or without them
+    "eval.video",
+    "eval.video_format",
+    "eval.video_every",
 )
 
 #: ``{old dotted key: new dotted key}`` for every config key an earlier layout of the

@@ -50,7 +50,9 @@ __all__ = [
     "ConfigValueError",
     "DemosConfig",
     "EnvConfig",
+    "EVAL_VIDEO_SIZE",
     "EvalConfig",
+    "VideoFormat",
     "GAILConfig",
     "GAILReward",
     "IQLearnConfig",
@@ -305,6 +307,17 @@ class WindowConfig:
     drop: list[str] = field(default_factory=list)
 
 
+#: Pixels per side of the final evaluation's videos (``eval.video``).
+EVAL_VIDEO_SIZE = 240
+
+
+class VideoFormat(str, enum.Enum):
+    """``eval.video_format`` of the final evaluation's videos."""
+
+    mp4 = "mp4"  # H.264 through PyAV
+    gif = "gif"  # through imageio and Pillow
+
+
 @dataclass
 class EvalConfig:
     episodes: int = at_least()
@@ -314,6 +327,12 @@ class EvalConfig:
     # Best-checkpoint selection by train-regime success, the mean return breaking ties;
     # false: by the mean return alone (what every run before the option did).
     select_by_success: bool = False
+    # Videos of the first `video` episodes of the final evaluation in each regime, written
+    # to <run_dir>/logs/videos/<regime>/episode_<i>.<video_format> (the [video] extra); the
+    # evaluation's records are the same with or without them.
+    video: int = at_least(0, default=0)
+    video_format: VideoFormat = VideoFormat.mp4
+    video_every: int = at_least(1, default=1)  # a frame every this many env steps (and the last)
 
 
 @dataclass
@@ -643,6 +662,10 @@ def _check_extras(cfg: DictConfig) -> None:
             raise ConfigValueError(message)
     if message := source_problem(cfg.demos.source):
         raise ConfigValueError(message)
+    if cfg.eval.video:
+        fmt = VideoFormat(cfg.eval.video_format)
+        if message := missing_extra(f"eval.video={cfg.eval.video} ({fmt.value})", "imageio", *(("av",) if fmt is VideoFormat.mp4 else ())):
+            raise ConfigValueError(message)
 
 
 def validate_config(cfg: DictConfig) -> None:
@@ -654,9 +677,9 @@ def validate_config(cfg: DictConfig) -> None:
             an off-policy budget no longer than its random warm-up; a device this
             machine lacks; ``compile=true`` where torch.compile cannot run; GAIL's actor with dropout; off-policy counts that do not
             divide (``random_steps`` by ``frames_per_batch``, ``num_envs`` by
-            ``collector_workers``); the env without an expert; a logger or a
-            ``demos.source`` whose package is not installed (naming the extra), or a
-            malformed ``demos.source``.
+            ``collector_workers``); the env without an expert; a logger, a
+            ``demos.source`` or ``eval.video`` whose package is not installed (naming the
+            extra), or a malformed ``demos.source``.
         omegaconf.errors.OmegaConfBaseException: an interpolation that does not resolve or
             a mandatory value left unset, naming the key.
 
