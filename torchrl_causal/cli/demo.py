@@ -27,15 +27,20 @@ import logging
 import os
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
+from torchrl_causal.cli.filmstrip import episode_of_run
 from torchrl_causal.evaluation import aggregate, effect_checks, load_runs, write_report
+from torchrl_causal.evaluation.rendering import EpisodeOutcome, rendered_episode
 from torchrl_causal.evaluation.tables import effect_markdown, lengths_markdown, raw_markdown, table1_markdown
+from torchrl_causal.evaluation.video import side_by_side, write_video
 from torchrl_causal.experiment import RunInterrupted, compose_config
 from torchrl_causal.experiment.interrupts import run_in_processes, signals_raise
+from torchrl_causal.extras import missing_extra
 from torchrl_causal.lifecycle import run
 
-__all__ = ["main", "demo_overrides", "DEMO_SETTINGS", "DEMO_ALGOS", "DEMO_RUNS"]
+__all__ = ["main", "demo_overrides", "side_by_side_video", "DEMO_SETTINGS", "DEMO_ALGOS", "DEMO_RUNS", "SIDE_BY_SIDE"]
 
 DEMO_SETTINGS: list[str] = [
     "scale=cpu",
@@ -90,6 +95,49 @@ DEMO_RUNS: tuple[tuple[str, bool], ...] = (
 def demo_overrides(algo: str, causal: bool, run_root: str | Path) -> list[str]:
     """The Hydra overrides of one demo run."""
     return [*DEMO_SETTINGS, f"algo={algo}", *DEMO_ALGOS[algo], f"causal={str(causal).lower()}", f"run_root={run_root}"]
+
+
+#: The side-by-side video of the report: one deploy-regime episode of each run, left to right.
+SIDE_BY_SIDE: tuple[tuple[str, str, bool], ...] = (("Causal SQIL", "sqil", True), ("SQIL", "sqil", False))
+SIDE_BY_SIDE_FILE = "deploy_side_by_side.gif"
+
+
+@dataclass(frozen=True)
+class SideBySide:
+    """The demo's side-by-side video and its caption (what each panel is, how it ended)."""
+
+    path: Path
+    captions: tuple[str, ...]
+
+    @property
+    def markdown(self) -> str:
+        return (
+            "## One deploy-regime episode, side by side\n\n"
+            f"![deploy-regime episodes side by side]({self.path.name})\n\n"
+            f"From left to right: {'; '.join(self.captions)}. The same seed, so the same start and the same gusts; "
+            "a panel whose episode ended first holds its last frame."
+        )
+
+
+def side_by_side_video(
+    root: str | Path, path: str | Path, *, seed: int = 0, every: int = 2, size: int = 160, fps: int = 20
+) -> SideBySide | None:
+    """One deploy-regime episode of Causal SQIL beside SQIL (:data:`SIDE_BY_SIDE`), seeded
+    alike, as a GIF at ``path``: the rover whose window leaves the compass out, next to the
+    one that reads the compass the deploy regime turned around. ``None`` (with a line saying
+    why) when the ``[video]`` extra is missing: the demo's tables do not need it."""
+    if message := missing_extra("the demo's side-by-side video", "imageio"):
+        print(message)
+        return None
+    clips, captions = [], []
+    for label, algo, causal in SIDE_BY_SIDE:
+        run_dir = compose_config(demo_overrides(algo, causal, root)).run_dir
+        outcome = EpisodeOutcome()
+        with episode_of_run(run_dir, "deploy", seed) as (env, acting, horizon):
+            episode = rendered_episode(env, acting, max_steps=horizon, every=every, width=size, height=size, outcome=outcome)
+            clips.append([frame for _, frame in episode])
+        captions.append(f"{label} ({f'goal at step {outcome.length}' if outcome.success else f'no goal in {outcome.length} steps'})")
+    return SideBySide(write_video(side_by_side(clips), path, fps=fps), tuple(captions))
 
 
 def _run_one(overrides: list[str]) -> int:
@@ -160,7 +208,11 @@ def _demo() -> None:
         print("\nThe paper's claims on these runs:\n")
         print(effect_markdown(effect_checks(table)))
     report = write_report(root, root / "report", name="demo", command="make demo")
-    print(f"\nReport: {report.markdown} (+ CSV and figures). Total {time.monotonic() - start:.0f} s.")
+    video = side_by_side_video(root, report.markdown.parent / SIDE_BY_SIDE_FILE)
+    if video is not None:
+        with report.markdown.open("a") as markdown:
+            markdown.write(f"\n{video.markdown}\n")
+    print(f"\nReport: {report.markdown} (+ CSV, figures and the side-by-side video). Total {time.monotonic() - start:.0f} s.")
 
 
 if __name__ == "__main__":

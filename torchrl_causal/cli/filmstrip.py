@@ -31,13 +31,13 @@ from torchrl_causal.evaluation.video import VIDEO_FORMATS, RecordedVideo, record
 from torchrl_causal.experiment import CheckpointError
 from torchrl_causal.lifecycle import open_run
 
-__all__ = ["filmstrip_of_run", "main", "video_of_run"]
+__all__ = ["episode_of_run", "filmstrip_of_run", "main", "video_of_run"]
 
 _ARGS = {"runs", "labels", "out", "regime", "seed", "frames", "every", "size", "camera", "format", "fps"}
 
 
 @contextmanager
-def _episode_of_run(run_dir: str | Path, regime: str, seed: int) -> Iterator[tuple[EnvBase, Policy, int]]:
+def episode_of_run(run_dir: str | Path, regime: str, seed: int) -> Iterator[tuple[EnvBase, Policy, int]]:
     """The imitator's env of ``run_dir`` (batch 1, seeded), its selected policy acting in
     it (the expert for the expert row) and the episode limit."""
     _, evaluator, policy = open_run(run_dir, device="cpu")
@@ -61,7 +61,7 @@ def filmstrip_of_run(
     camera: str | None = None,
 ) -> Filmstrip:
     """One ``regime`` episode of the selected policy of ``run_dir`` (see the module docstring)."""
-    with _episode_of_run(run_dir, regime, seed) as (env, acting, horizon):
+    with episode_of_run(run_dir, regime, seed) as (env, acting, horizon):
         return record_filmstrip(env, acting, max_steps=horizon, frames=frames, every=every, width=size, height=size, camera=camera)
 
 
@@ -77,7 +77,7 @@ def video_of_run(
     camera: str | None = None,
 ) -> RecordedVideo:
     """The same episode as :func:`filmstrip_of_run`, as a video at ``path`` (``.mp4`` / ``.gif``)."""
-    with _episode_of_run(run_dir, regime, seed) as (env, acting, horizon):
+    with episode_of_run(run_dir, regime, seed) as (env, acting, horizon):
         return record_video(env, acting, path, max_steps=horizon, every=every, fps=fps, width=size, height=size, camera=camera)
 
 
