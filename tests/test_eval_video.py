@@ -33,6 +33,18 @@ def _evaluate(observer=None, seed=5, regime="deploy"):
     return env, result, env.rng.get_state(), torch.get_rng_state()
 
 
+def _gif_frames(path, fps: int) -> np.ndarray:
+    """Every frame of a GIF written at ``fps``: the writer (Pillow) merges a frame identical
+    to the one before it into that one's duration, which tells how many it stands for."""
+    from PIL import Image, ImageSequence
+
+    frames = []
+    with Image.open(path) as gif:
+        for frame in ImageSequence.Iterator(gif):
+            frames += [np.asarray(frame.convert("RGB"))] * round(frame.info["duration"] * fps / 1000)
+    return np.stack(frames)
+
+
 def _frames_of(length: int, every: int) -> int:
     """Frames a recorded episode of ``length`` steps has: after the reset, after every
     ``every``-th step, and after the last one when that is not already a multiple."""
@@ -43,26 +55,26 @@ def _frames_of(length: int, every: int) -> int:
 def test_videos_change_no_record_and_draw_no_random_number(tmp_path, every: int) -> None:
     _, plain, plain_rng, plain_torch = _evaluate()
     # 7 of 8 episodes over two rounds of 6: the second round records its first row only.
-    videos = EpisodeVideos(tmp_path, 7, fmt="gif", every=every, width=SIZE, height=SIZE)
+    videos = EpisodeVideos(tmp_path, 7, fmt="gif", every=every, fps=10, width=SIZE, height=SIZE)
     env, recorded, recorded_rng, recorded_torch = _evaluate(videos)
     assert (recorded.successes, recorded.returns, recorded.lengths) == (plain.successes, plain.returns, plain.lengths)
     assert torch.equal(recorded_rng, plain_rng) and torch.equal(recorded_torch, plain_torch)
     assert [path.name for path in videos.paths] == [f"episode_{i}.gif" for i in range(7)]
     for path, frames, length in zip(videos.paths, videos.frames, recorded.lengths):
-        assert frames == _frames_of(length, every) == iio.imread(path, index=None).shape[0], path.name
+        assert frames == _frames_of(length, every) == len(_gif_frames(path, fps=10)), path.name
     # The second round's recorded episode (row 0) ended where the env still holds it: its
     # last frame is that state (a rover frame has a few colours: the GIF is exact).
-    last = iio.imread(videos.paths[6], index=None)[-1]
+    last = _gif_frames(videos.paths[6], fps=10)[-1]
     np.testing.assert_array_equal(last, env.render(width=SIZE, height=SIZE, rows=[0])[0])
 
 
 def test_first_frame_is_the_rows_render_after_the_seeded_reset(tmp_path) -> None:
-    videos = EpisodeVideos(tmp_path, 3, fmt="gif", every=10, width=SIZE, height=SIZE)
+    videos = EpisodeVideos(tmp_path, 3, fmt="gif", every=10, fps=10, width=SIZE, height=SIZE)
     _evaluate(videos)
     fresh = RoverMazeEnv(maze="u", batch_size=(WIDTH,), regime="deploy", horizon=HORIZON, seed=5)
     fresh.reset()
     starts = fresh.render(width=SIZE, height=SIZE)
-    firsts = [iio.imread(path, index=None)[0] for path in videos.paths]
+    firsts = [_gif_frames(path, fps=10)[0] for path in videos.paths]
     for row, first in enumerate(firsts):
         np.testing.assert_array_equal(first, starts[row])
     assert not np.array_equal(firsts[0], firsts[1])  # the rows start apart (jitter and heading)
@@ -85,22 +97,23 @@ def test_refuses_an_env_without_a_renderer_in_one_line() -> None:
 
 
 def test_run_writes_videos_in_its_logs_and_the_same_records(tmp_path) -> None:
+    pytest.importorskip("av", reason="the [video] extra is not installed")
     from torchrl_causal.experiment import compose_config
     from torchrl_causal.experiment.run_directory import changed_keys
     from torchrl_causal.lifecycle import run
 
     overrides = tiny("expert", "eval.final_episodes=5", "eval.num_envs=3")
     plain = compose_config([*overrides, f"run_root={tmp_path / 'plain'}"])
-    filmed = compose_config([*overrides, f"run_root={tmp_path / 'filmed'}", "eval.video=2", "eval.video_format=gif", "eval.video_every=8"])
+    filmed = compose_config([*overrides, f"run_root={tmp_path / 'filmed'}", "eval.video=2", "eval.video_every=8"])
     without, with_videos = run(plain), run(filmed)
     for regime in ("train", "deploy"):
         a, b = without[regime], with_videos[regime]
         assert (a.successes, a.returns, a.lengths) == (b.successes, b.returns, b.lengths)
         folder = tmp_path / "filmed" / filmed.run_name / "logs" / "videos" / regime
-        assert sorted(path.name for path in folder.iterdir()) == ["episode_0.gif", "episode_1.gif"]
+        assert sorted(path.name for path in folder.iterdir()) == ["episode_0.mp4", "episode_1.mp4"]
         for episode in range(2):
-            frames = iio.imread(folder / f"episode_{episode}.gif", index=None).shape[0]
-            assert frames == _frames_of(b.lengths[episode], 8)
+            frames = iio.imread(folder / f"episode_{episode}.mp4", index=None, plugin="pyav")
+            assert frames.shape == (_frames_of(b.lengths[episode], 8), 240, 240, 3)
     # Videos are no part of the run's identity: a finished run resumes with or without them.
     assert changed_keys({"eval": {"episodes": 4}}, {"eval": {"episodes": 4, "video": 3, "video_format": "gif", "video_every": 2}}) == {}
 
@@ -136,7 +149,7 @@ def test_mujoco_videos_change_no_record(tmp_path) -> None:
     videos = EpisodeVideos(tmp_path, 1, fmt="gif", every=6, width=16, height=16)
     recorded, recorded_rng = evaluate(videos)
     assert recorded.returns == plain.returns and recorded.lengths == plain.lengths and torch.equal(recorded_rng, plain_rng)
-    assert iio.imread(videos.paths[0], index=None).shape == (3, 16, 16, 3)  # after reset, step 6, step 12
+    assert videos.frames == [3]  # after reset, step 6, step 12
 
 
 def test_demo_side_by_side_puts_each_runs_deploy_episode_in_its_panel(tmp_path, monkeypatch, capsys) -> None:
@@ -156,7 +169,7 @@ def test_demo_side_by_side_puts_each_runs_deploy_episode_in_its_panel(tmp_path, 
     # (the first panel's, and the first strip's): the same state for both.
     torch.manual_seed(0)
     video = demo.side_by_side_video(tmp_path, tmp_path / "side.gif", every=5, size=32)
-    frames = iio.imread(video.path, index=None)
+    frames = _gif_frames(video.path, fps=20)  # side_by_side_video's default fps
     strips = []
     for cfg in runs:
         torch.manual_seed(0)

@@ -74,6 +74,9 @@ class VideoFile:
         fps = int(self.fps if fps is None else fps)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if self.path.suffix == ".gif":
+            # Pillow stores a frame identical to the one before it as a longer duration of
+            # that one: the GIF plays the same, with fewer frames to decode. GIF durations
+            # are whole centiseconds, so an fps that divides 100 plays at exactly fps.
             iio.imwrite(self.path, frames, extension=".gif", duration=1000 / fps, loop=0)
             return
         _write_mp4(self.path, frames, fps)
