@@ -9,7 +9,8 @@ acts in one ``regime`` episode (default ``deploy``) seeded with ``seed``, in the
 imitator's view of its own run; ``frames`` evenly spaced frames are kept, looked at from
 above the whole maze (``camera=<name>`` picks an MJCF camera, e.g. ``track``). Every run
 gets the same seed, so every row starts from the same state and sees the same gusts.
-Needs a MuJoCo maze env and an offscreen GL context (EGL on a headless machine).
+Needs a maze env: RoverMaze draws its top-down view with torch; the MuJoCo mazes need an
+offscreen GL context (EGL on a headless machine, or ``MUJOCO_GL=osmesa``).
 """
 
 from __future__ import annotations
