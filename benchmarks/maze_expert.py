@@ -31,19 +31,26 @@ import torch
 from torchrl_causal.cli.arguments import OneLineParser, count, non_negative, non_negative_number, positive_number
 from torchrl_causal.envs import AntMazeEnv, HumanoidMazeEnv
 from torchrl_causal.evaluation import evaluate_policy
+from torchrl_causal.evaluation.paper import paper_figure
 from torchrl_causal.experts import AntMazeExpert, HumanoidMazeExpert
 
 
 class Robot(NamedTuple):
     env: type
     expert: type
-    paper: dict[str, tuple[float, int, int, float]]  # per maze: success %, mean successful length, its std, raw E[Y]
+    task: str  # the prefix of the paper's task names (torchrl_causal.evaluation.paper.PAPER_TASKS)
 
 
 ROBOTS = {
-    "ant": Robot(AntMazeEnv, AntMazeExpert, {"medium": (87.6, 301, 57, -104.0), "large": (55.9, 648, 99, -255.2)}),
-    "humanoid": Robot(HumanoidMazeEnv, HumanoidMazeExpert, {"medium": (33.8, 976, 410, -522.9), "large": (7.0, 1463, 366, -840.6)}),
+    "ant": Robot(AntMazeEnv, AntMazeExpert, "antmaze"),
+    "humanoid": Robot(HumanoidMazeEnv, HumanoidMazeExpert, "humanoidmaze"),
 }
+
+
+def paper_expert(robot: str, maze: str) -> str:
+    """The paper's expert on ``maze``: success % / mean successful length ± std / raw E[Y]."""
+    p = paper_figure(f"{ROBOTS[robot].task}_{maze}", "expert")
+    return f"{p.success}% / {p.length_mean:.0f} ± {p.length_std:.0f} / {p.return_mean}"
 
 
 def _expert_options(weights: str | None, clearance: float | None) -> dict:
@@ -133,8 +140,7 @@ def main() -> None:
         for radius in args.radius:
             for regime in args.regimes:
                 r = evaluate(args.robot, maze, regime, radius, args.episodes, args.batch, args.seed, args.weights, args.clearance)
-                p = robot.paper[maze]
-                paper = f"{p[0]}% / {p[1]} ± {p[2]} / {p[3]}" if regime == "train" else "—"
+                paper = paper_expert(args.robot, maze) if regime == "train" else "—"
                 lines.append(
                     f"| {maze} | {radius:g} | {regime} | {r.n_episodes} | {100 * r.success_rate:.1f} ± "
                     f"{100 * r.success_se:.1f} | {r.ep_len_mean:.0f} ± {r.ep_len_std:.0f} | "

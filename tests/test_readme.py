@@ -9,6 +9,10 @@ Every results table in those documents is preceded by ``<!-- figures: results/<f
   (the leading number, without its ``± SE``), the row of the same algorithm in the file's
   table with the same column headers.
 
+Table 1 (the top of ``docs/results.md``) and its summary in the README are generated blocks:
+regenerating them from ``results/table1.yaml`` and the reports it names must give the committed
+text, cell for cell (``python -m torchrl_causal.report table1 ...`` rewrites them).
+
 A figure that changes in ``results/`` without the documents following fails here; so does a
 link of the README to a file that is not there.
 """
@@ -21,12 +25,15 @@ from pathlib import Path
 
 import pytest
 
+from torchrl_causal.evaluation.table1 import load_table1_spec, read_block, table1_cells, table1_markdown, table1_summary_markdown
 from torchrl_causal.evaluation.tables import REGIMES, display_name
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 #: The documents whose results tables quote ``results/``: the README's one table, the rest in docs.
 DOCUMENTS = (README, ROOT / "docs" / "results.md")
+#: Which reports Table 1 reads, and the command that regenerates its blocks.
+TABLE1_SPEC = ROOT / "results" / "table1.yaml"
 MARKER = re.compile(r"<!--\s*figures:\s*(\S+)\s*-->")
 
 Table = list[list[str]]
@@ -122,6 +129,17 @@ def test_every_results_table_is_marked() -> None:
     assert len(tables["results.md"][0]) >= 6, f"docs/results.md has {len(tables['results.md'][0])} results tables"
     unmarked = {name: [rows[0] for rows in tables[name][1]] for name in tables if tables[name][1]}
     assert not unmarked, f"results tables without a figures marker: {unmarked}"
+
+
+def test_table1_is_regenerated_from_the_results() -> None:
+    spec = load_table1_spec(TABLE1_SPEC)
+    cells = table1_cells(spec)
+    command = f"rerun `{spec.command}`"
+    assert read_block(DOCUMENTS[1].read_text(), "table1") == table1_markdown(spec, cells), command
+    assert read_block(README.read_text(), "table1-summary") == table1_summary_markdown(spec, cells), command
+    assert DOCUMENTS[1].read_text().index("<!-- table1: generated") < DOCUMENTS[1].read_text().index("## Lab notebook"), (
+        "docs/results.md opens with Table 1"
+    )
 
 
 def test_readme_links_resolve() -> None:

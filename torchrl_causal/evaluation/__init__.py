@@ -4,7 +4,10 @@
   (success rate ± SE, raw E[Y] ± std, lengths of successful episodes);
 * :func:`load_runs` reads run directories back; :func:`write_report` turns them into
   Table 1 (normalised E[Y]), the raw and episode-length tables, the results CSV and
-  PNG figures.
+  PNG figures;
+* :mod:`~torchrl_causal.evaluation.paper` keeps the paper's published figures, and
+  :mod:`~torchrl_causal.evaluation.table1` sets committed reports beside them as Table 1
+  (``python -m torchrl_causal.report table1``).
 """
 
 from torchrl_causal.evaluation.metrics import EvaluationResult, evaluate_policy
