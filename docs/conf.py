@@ -48,6 +48,7 @@ napoleon_google_docstring = True
 napoleon_numpy_docstring = False
 napoleon_use_rtype = False
 napoleon_attr_annotations = True
+napoleon_preprocess_types = True  # "float, optional": optional is a keyword, not a class
 napoleon_custom_sections = [("Class attributes", "Attributes")]  # envs/base.py's GustConfoundedEnv
 
 myst_heading_anchors = 3
@@ -59,6 +60,10 @@ html_theme_options = {"description": "TorchRL components for causal imitation le
 
 # Offline: other libraries' objects cannot be resolved (no inventories), so each package is
 # named here; a reference into torchrl_causal that does not resolve still fails the build.
-EXTERNAL = ("torch", "torchrl", "tensordict", "numpy", "np", "omegaconf", "hydra", "gymnasium", "mujoco", "networkx", "matplotlib", "tqdm", "pathlib", "collections", "typing", "os", "logging", "dataclasses", "enum", "abc", "types", "subprocess", "io", "datetime", "argparse", "concurrent", "multiprocessing", "threading", "re", "json", "contextlib", "functools", "itertools", "signal", "tempfile", "random", "h5py", "minari", "wandb", "av", "imageio", "PIL", "ogbench", "dm_control", "submitit", "_io", "_thread", "builtins", "numbers", "queue", "weakref", "shutil", "zipfile", "hashlib", "socket", "sys")
+EXTERNAL = ("torch", "torchrl", "tensordict", "numpy", "np", "omegaconf", "hydra", "gymnasium", "mujoco", "networkx", "matplotlib", "tqdm", "pathlib", "collections", "typing", "os", "logging", "dataclasses", "enum", "abc", "types", "subprocess", "io", "datetime", "argparse", "concurrent", "multiprocessing", "threading", "re", "json", "contextlib", "functools", "itertools", "signal", "tempfile", "random", "h5py", "minari", "wandb", "av", "imageio", "PIL", "ogbench", "dm_control", "submitit", "_io", "_thread", "builtins", "fractions", "numbers", "queue", "weakref", "shutil", "zipfile", "hashlib", "socket", "sys")
 nitpicky = True
-nitpick_ignore_regex = [(r"py:.*", rf"{package}(\..*)?") for package in EXTERNAL]
+# Names of those libraries that the type hints carry unqualified (from __future__ annotations).
+EXTERNAL_SHORT = ("Module", "TensorDictModule", "TensorDictBase", "TensorDict", "NestedKey", "DEVICE_TYPING", "EnvBase",
+                  "ProbabilisticTensorDictSequential", "WeightUpdaterBase", "WeightSyncScheme", "TensorSpec", "Composite",
+                  "DictConfig", "Tensor", "Storage")
+nitpick_ignore_regex = [(r"py:.*", rf"{package}(\..*)?") for package in EXTERNAL] + [(r"py:class", name) for name in EXTERNAL_SHORT]
