@@ -90,7 +90,6 @@ from torchrl_causal.objectives.pseudo_huber_bc import PseudoHuberBCLoss
 out = io.StringIO()
 with contextlib.redirect_stdout(out):
     main(["window", "env=rovermaze_u_wide_goal", "k=2"])
-main(["train", *sys.argv[2:]])
 # the loss against its closed form, elementwise errors x = a - a*: delta^2 (sqrt(1 + (x/delta)^2) - 1)
 spec = Bounded(-1.0, 1.0, shape=(2,))
 actor = make_deterministic_actor(3, spec, hidden=8, num_blocks=1)
@@ -100,6 +99,7 @@ loss = PseudoHuberBCLoss(actor, delta=0.3)(batch)["loss_bc"].item()
 x = (predicted - batch["action"]).double()
 expected = (0.09 * (torch.sqrt(1 + (x / 0.3) ** 2) - 1)).mean().item()
 json.dump({"window": out.getvalue(), "loss": loss, "expected": expected}, open(sys.argv[1], "w"))
+main(["train", *sys.argv[2:]])  # last: Hydra's main may end the process
 """
 
 
