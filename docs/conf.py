@@ -9,7 +9,9 @@ this package's own objects must resolve.
 
 from __future__ import annotations
 
+import importlib
 import os
+import pkgutil
 import sys
 from pathlib import Path
 
@@ -59,6 +61,25 @@ myst_enable_extensions = ["colon_fence"]
 html_theme = "alabaster"
 html_title = f"torchrl-causal {release}"
 html_theme_options = {"description": "TorchRL components for causal imitation learning", "fixed_sidebar": True, "page_width": "1180px"}
+
+
+def _aliases() -> list[str]:
+    """Modules that only forward names defined elsewhere: the old import paths kept for
+    archived configs (``envs.planner`` -> ``experts.planner``) and the ``python -m
+    torchrl_causal.<command>`` aliases. Each object is documented once, where it is defined
+    (documenting an alias too is a duplicate description, a warning)."""
+    found = []
+    for info in pkgutil.walk_packages(torchrl_causal.__path__, "torchrl_causal."):
+        if info.ispkg:
+            continue
+        module = importlib.import_module(info.name)
+        names = getattr(module, "__all__", None)
+        if names and all(getattr(getattr(module, name), "__module__", info.name) != info.name for name in names):
+            found.append(info.name)
+    return found
+
+
+autosummary_context = {"aliases": _aliases()}
 
 # Offline: other libraries' objects cannot be resolved (no inventories), so each package is
 # named here; a reference into torchrl_causal that does not resolve still fails the build.
