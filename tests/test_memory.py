@@ -1,9 +1,14 @@
 """The run footprint estimate: each item equals the bytes of the tensors it stands for,
 windows too long to build are extrapolated exactly, and a run that would not fit is
-refused by name before anything is allocated (small limits; nothing big is allocated)."""
+refused by name before anything is allocated (small limits; nothing big is allocated), and
+the whole estimate bounds the measured peak resident size of a real (small) run."""
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -69,3 +74,49 @@ def test_every_algorithm_has_an_estimate() -> None:
     for algo in ("expert", "bc", "gail", "sqil", "iq_learn"):
         footprint = run_footprint(compose_config(["env=rovermaze_u", f"algo={algo}", "run_root=/nonexistent/runs"]))
         assert 0.5 * GB <= footprint.ram_bytes < 2 * GB, (algo, footprint)
+
+
+MEASURE = r"""
+import json, resource, sys
+from torchrl_causal import lifecycle
+from torchrl_causal.experiment import compose_config
+from torchrl_causal.experiment.memory import run_footprint
+
+def resident():
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * resource.getpagesize()
+
+cfg = compose_config(sys.argv[2:])
+base = resident()  # the libraries imported, nothing of the run allocated yet
+footprint = run_footprint(cfg)
+lifecycle.run(cfg)
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # kB on Linux
+json.dump({"base": base, "peak": peak, "estimate": footprint.ram_bytes, "items": footprint.ram}, open(sys.argv[1], "w"))
+"""
+
+
+@pytest.mark.slow
+def test_the_estimate_bounds_the_measured_peak_of_a_run(tmp_path: Path) -> None:
+    # A BC run whose encoded demonstrations (8,000 transitions at k = 50, ~31 MB) are the
+    # largest item that scales, trained for one epoch: its own process, so that the peak
+    # resident size (ru_maxrss) is this run's alone.
+    overrides = [
+        *["env=rovermaze_u", "algo=bc", "causal=true", "env.horizon=200", "window.k=50", "demos.episodes=40"],
+        *["eval.episodes=4", "eval.num_envs=4", "eval.final_episodes=4", "algo.actor.hidden=16", "algo.actor.num_blocks=1"],
+        *["algo.epochs=1", "algo.batch_size=256", "algo.eval_every=1", "threads=1", "progress_bar=false", f"run_root={tmp_path}"],
+    ]
+    out = tmp_path / "measured.json"
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    done = subprocess.run([sys.executable, "-c", MEASURE, str(out), *overrides], env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    measured = json.loads(out.read_text())
+    estimate, peak, base = measured["estimate"], measured["peak"], measured["base"]
+    encoded = next(v for k, v in measured["items"].items() if k.startswith("encoded demonstrations"))
+    # The estimate bounds the real peak, and not loosely: within a factor 2 of it.
+    assert peak <= estimate <= 2 * peak, measured
+    # What it allows the run beyond the imported libraries covers the run's measured growth
+    # (the libraries' allowance, 0.5 GB, carries the run's fixed costs: networks, envs,
+    # workspaces) within a factor 4 of it, and the largest scaled item fits inside that growth.
+    growth = peak - base
+    assert growth <= estimate - base <= 4 * growth, measured
+    assert encoded <= growth, measured

@@ -266,7 +266,7 @@ def record_settings(episodes: int, seed: int, num_envs: int, confounding_strengt
 def open_run(
     run_dir: str | Path, *, confounding_strength: float | None = None, device: str | None = None
 ) -> tuple[RunDirectory, Evaluator, TensorDictModuleBase | None]:
-    """The run directory, an :class:`Evaluator` of its config and its selected policy
+    """The run directory, an :class:`~torchrl_causal.evaluation.evaluator.Evaluator` of its config and its selected policy
     (``checkpoints/best.pt``; ``None`` for the expert row, which the evaluator rebuilds
     from each env).
 

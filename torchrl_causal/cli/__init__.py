@@ -21,8 +21,18 @@ from collections.abc import Sequence
 
 __all__ = ["COMMANDS", "main"]
 
-#: The command lines, in the order a new user meets them.
-COMMANDS = ("train", "evaluate", "report", "status", "archive", "demo", "filmstrip", "strength_ablation")
+#: The command lines, in the order a new user meets them: the registry of ``torchrl-causal
+#: <command>``, one line each (``cli/<command>.py`` holds its ``main``).
+COMMANDS = (
+    "train",
+    "evaluate",
+    "report",
+    "status",
+    "archive",
+    "demo",
+    "filmstrip",
+    "strength_ablation",
+)
 
 USAGE = (
     "usage: torchrl-causal <command> [args]\n"

@@ -108,7 +108,7 @@ def run_statuses(root: str | Path) -> list[dict[str, str]]:
     Raises:
         FileNotFoundError: if ``root`` does not exist.
         InvalidValueError: if ``root`` is a file (a ``ValueError``).
-        RunFileError: a run's ``status.json`` or evaluation that does not parse, named.
+        ~torchrl_causal.experiment.run_directory.RunFileError: a run's ``status.json`` or evaluation that does not parse, named.
     """
     root = Path(root)
     if not root.exists():

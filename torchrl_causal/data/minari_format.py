@@ -19,7 +19,7 @@ set of :mod:`~torchrl_causal.data.demonstrations`:
 
 Loading reads the episodes with Minari's reader (no network), lays them out as TorchRL's
 :class:`~torchrl.data.datasets.MinariExperienceReplay` does (``("observation", <key>)``,
-``("next", "observation", <key>)``; :func:`replay_layout`) and maps that back to ours
+``("next", "observation", <key>)``; :func:`~torchrl_causal.data.minari_format.replay_layout`) and maps that back to ours
 (:func:`from_minari_replay`, which takes ``MinariExperienceReplay``'s output alike).
 A dataset made elsewhere can be loaded too when its metadata carries that entry (the
 ``"env"`` config and the ``"manifest"``; the ``"checksum"`` is verified when present).
@@ -442,9 +442,9 @@ def load_minari_demonstrations(
 
     The episodes are read with Minari's own reader (``minari.MinariDataset(...).iterate_episodes()``,
     no network), laid out as TorchRL's ``MinariExperienceReplay`` lays them out
-    (:func:`replay_layout`) and mapped to our layout (:func:`from_minari_replay`).
+    (:func:`~torchrl_causal.data.minari_format.replay_layout`) and mapped to our layout (:func:`from_minari_replay`).
     ``MinariExperienceReplay`` itself is not used: in TorchRL 0.14.1 every value it returns
-    is zero (see :func:`replay_layout`); ``from_minari_replay`` takes its output once fixed.
+    is zero (see :func:`~torchrl_causal.data.minari_format.replay_layout`); ``from_minari_replay`` takes its output once fixed.
 
     Args:
         source: the dataset's directory, or its id under ``$MINARI_DATASETS_PATH`` /

@@ -297,7 +297,7 @@ class ConfoundedEnv(EnvBase):
     * :meth:`_make_variable_specs`: the specs of ``"action"`` and of the variable keys;
     * :meth:`_reset_state` (draw the initial state where a mask is set),
       :meth:`_transition` (advance one step, return reward and success) and
-      :meth:`_observation` (the variable entries of the current state).
+      ``_observation()`` (the variable entries of the current state).
 
     The base adds ``"success"`` (bool, ``batch + (1,)``), ``"done"``/``"terminated"``/
     ``"truncated"`` (terminated = success, truncated = ``horizon`` steps reached without
@@ -589,7 +589,7 @@ class GustConfoundedEnv(ConfoundedEnv):
     Keeps the gust of the current step in :attr:`gust` (``batch + (2,)``), redrawn by
     :attr:`gust_process` at every multiple of its period, and reads the sensor W with
     :meth:`read_compass`. The gust is exposed under ``("scm", "U")``; subclasses add
-    ``scm_observation()`` to their :meth:`_observation` and use :meth:`gust_penalty` in
+    ``scm_observation()`` to their ``_observation()`` and use :meth:`gust_penalty` in
     their reward.
 
     Class attributes:

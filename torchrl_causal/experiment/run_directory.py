@@ -504,7 +504,7 @@ class RunDirectory:
 
         Raises:
             FileNotFoundError: the directory holds no run.
-            RunFileError: ``config.yaml`` does not parse.
+            ~torchrl_causal.experiment.run_directory.RunFileError: ``config.yaml`` does not parse.
         """
         if not self.config_file.is_file():
             raise MissingFileError(f"{self.path} is not a run directory: {CONFIG_FILE} is missing")
@@ -756,7 +756,7 @@ class RunDirectory:
         """A JSON record of the run (``status.json``, ``window.json``, ``eval/*.json``...).
 
         Raises:
-            RunFileError: naming the file, when it does not parse or is not an object.
+            ~torchrl_causal.experiment.run_directory.RunFileError: naming the file, when it does not parse or is not an object.
         """
         try:
             record = json.loads(path.read_text())

@@ -24,7 +24,7 @@ _NEIGHBOURS = ((-1, 0), (1, 0), (0, -1), (0, 1))
 
 
 class MazePlanner:
-    """Shortest-path waypoints to a goal cell over a :class:`MazeLayout` (batched).
+    """Shortest-path waypoints to a goal cell over a :class:`~torchrl_causal.envs.maze_layout.MazeLayout` (batched).
 
     Args:
         layout: the maze.

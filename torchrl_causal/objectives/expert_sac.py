@@ -177,7 +177,7 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
     #: subclasses whose critic reward is implicit say what it is).
     expert_reward: float = 1.0
 
-    #: The value estimator's discount as a Python float, set by :meth:`make_value_estimator`.
+    #: The value estimator's discount as a Python float, set by :meth:`~torchrl.objectives.LossModule.make_value_estimator`.
     _discount: float | None = None
 
     def make_value_estimator(self, value_type=None, **hyperparams) -> None:
@@ -189,7 +189,7 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
 
     @property
     def discount(self) -> float:
-        """The discount of the value estimator (:meth:`make_value_estimator`)."""
+        """The discount of the value estimator (:meth:`~torchrl.objectives.LossModule.make_value_estimator`)."""
         if self._discount is None:
             self.make_value_estimator()  # TorchRL's default estimator, as ``value_estimator`` builds it
         assert self._discount is not None  # set by make_value_estimator (for the type checker)

@@ -74,7 +74,7 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
     loss. The value term costs ``2K`` critic evaluations per row with gradient.
 
     In both, ``d`` is ``("next", "terminated")`` and ``gamma`` comes from
-    :meth:`make_value_estimator` (TD(0) only: the implicit reward is a one-step
+    :meth:`~torchrl.objectives.LossModule.make_value_estimator` (TD(0) only: the implicit reward is a one-step
     quantity). The actor and alpha losses are :class:`~torchrl.objectives.SACLoss`'s;
     the batch carries no reward. With ``reduction="none"`` the per-transition loss is
     :math:`\sum_j -\frac{N}{N_{\text{expert}}}\,e\,\hat r_j + \tfrac12 \hat r_j^2`
@@ -93,7 +93,8 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
         variant (str, optional): ``"paper"`` or ``"iq_learn"`` (see above). Defaults to ``"paper"``.
         num_value_samples (int, optional): ``K``, the number of policy samples per soft
             value. Defaults to ``16`` (paper's AntMaze; HumanoidMaze uses ``1``).
-        min_alpha, max_alpha (float, optional): alpha clamp, defaults ``1e-3`` and ``0.1``.
+        min_alpha (float, optional): lower clamp of alpha. Defaults to ``1e-3``.
+        max_alpha (float, optional): upper clamp of alpha. Defaults to ``0.1``.
         absorbing (bool, optional): read absorbing-state flags. Defaults to ``False``.
         goal_value, bc_weight: the goal's value (``variant="paper"`` only: its expert reward
             is ``1/p``, so the goal is worth ``(1/p) / (1 - gamma)``) and the
@@ -197,7 +198,7 @@ class IQLearnLoss(ExpertFlaggedSACLoss):
         return self.value_estimator.value_estimate(td, next_value=ones)
 
     def qvalue_v2_loss(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        """The chi-squared critic loss of :attr:`variant`; replaces SAC's soft Bellman regression in :meth:`forward`."""
+        """The chi-squared critic loss of ``variant``; replaces SAC's soft Bellman regression in :meth:`forward`."""
         expert = self.expert_flag(tensordict).to(self.log_alpha.dtype)
         num_expert = expert.sum()
         message = (

@@ -25,7 +25,7 @@ class SQILLoss(ExpertFlaggedSACLoss):
         \quad a' \sim \pi(\cdot \mid z'),
 
     with ``d`` the ``("next", "terminated")`` flag (time-limit truncation still
-    bootstraps) and ``gamma`` set by :meth:`make_value_estimator` (TD(0), 0.99 by
+    bootstraps) and ``gamma`` set by :meth:`~torchrl.objectives.LossModule.make_value_estimator` (TD(0), 0.99 by
     default). The critic loss is squared error summed over the twin critics
     (TorchRL's convention; the paper's ``1/2`` factor only rescales gradients).
 

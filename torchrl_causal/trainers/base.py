@@ -70,18 +70,18 @@ class Trainer(ABC):
     """One run of one algorithm: ``Trainer(cfg, run, window, evaluate).fit()`` trains to
     the budget and leaves the selected policy in ``checkpoints/best.pt``.
 
-    Subclasses set :attr:`unit` and :attr:`budget_key` and implement :meth:`setup` (build
-    envs, networks, losses, buffers), :meth:`train_step` (advance :attr:`progress` by one
+    Subclasses set :attr:`~torchrl_causal.trainers.base.Trainer.unit` and :attr:`budget_key` and implement :meth:`setup` (build
+    envs, networks, losses, buffers), :meth:`train_step` (advance :attr:`~torchrl_causal.trainers.base.Trainer.progress` by one
     iteration), :meth:`training_state` / :meth:`load_training_state` (everything resume
     needs) and :attr:`policy`.
 
-    Progress is counted in :attr:`unit` (env steps, epochs or rounds) up to the budget
+    Progress is counted in :attr:`~torchrl_causal.trainers.base.Trainer.unit` (env steps, epochs or rounds) up to the budget
     ``cfg.<budget_key>``; every ``cfg.algo.eval_every`` units ``evaluate(policy)`` scores
     the policy (in the train regime), the best one by mean return (by success rate, the
     return breaking ties, with ``cfg.eval.select_by_success``) is kept in
     ``checkpoints/best.pt``. The full state goes to ``checkpoints/last.pt`` at every
     evaluation, every ``cfg.checkpoint_every_s`` seconds and on SIGINT/SIGTERM, after
-    which :meth:`fit` raises :class:`~torchrl_causal.experiment.interrupts.RunInterrupted`.
+    which :meth:`~torchrl_causal.trainers.base.Trainer.fit` raises :class:`~torchrl_causal.experiment.interrupts.RunInterrupted`.
     Resume restores the networks, optimisers, schedulers, RNG states, counters and the
     episodes in flight: the run continues as if it had not stopped.
 
@@ -95,8 +95,9 @@ class Trainer(ABC):
             resolved here when not given.
     """
 
+    #: what :attr:`progress` counts: ``"env steps"``, ``"epochs"`` or ``"rounds"``.
     unit: ClassVar[str] = "steps"
-    #: the config key holding the training budget, counted in :attr:`unit`.
+    #: the config key holding the training budget, counted in :attr:`~torchrl_causal.trainers.base.Trainer.unit`.
     budget_key: ClassVar[str]
 
     def __init__(
@@ -113,6 +114,7 @@ class Trainer(ABC):
         self.window = window
         self.evaluate = evaluate
         self.device = resolve_device(cfg.device) if device is None else device
+        #: units of training done so far (see :attr:`unit`).
         self.progress = 0
         self.best_return = -math.inf
         self.best_success = -math.inf
@@ -124,7 +126,7 @@ class Trainer(ABC):
 
     @classmethod
     def budget(cls, cfg: DictConfig) -> int:
-        """The training length in :attr:`unit` that ``cfg`` asks for."""
+        """The training length in :attr:`~torchrl_causal.trainers.base.Trainer.unit` that ``cfg`` asks for."""
         return int(OmegaConf.select(cfg, cls.budget_key))
 
     @classmethod
@@ -151,7 +153,7 @@ class Trainer(ABC):
 
     @abstractmethod
     def train_step(self) -> Mapping[str, float | torch.Tensor]:
-        """One iteration; advances :attr:`progress`; returns scalars to log (floats or
+        """One iteration; advances :attr:`~torchrl_causal.trainers.base.Trainer.progress`; returns scalars to log (floats or
         0-dim tensors, which are read back from their device only when logged)."""
 
     @abstractmethod
@@ -169,7 +171,7 @@ class Trainer(ABC):
         """The network being trained that acts."""
 
     def close(self) -> None:
-        """Releases envs and collectors at the end of :meth:`fit`."""
+        """Releases envs and collectors at the end of :meth:`~torchrl_causal.trainers.base.Trainer.fit`."""
 
     def finish(self) -> None:
         """Called once the run is complete: drops what only a continuation would need."""

@@ -99,7 +99,7 @@ class EpisodeHistory(Sequence):
 
     @property
     def window_length(self) -> int:
-        """Records per sampled step: ``k + 1``."""
+        """The records per sampled step, ``k + 1``."""
         return self.burn_in + 1
 
     def expand(
