@@ -24,19 +24,20 @@ __all__ = ["OPTIONS", "main"]
 
 TARGET_KEYS = ("causal_fraction", "non_causal_fraction", "train_gap_points")
 OPTIONS: dict[str, Option] = {
-    "runs": Option(list, placeholder="<dir>|[<dir>,...]"),
-    "out": Option(str, None, placeholder="<runs>/report"),
-    "name": Option(str, None, placeholder="<env name>"),
-    "command": Option(str, None, placeholder="<the file's earlier command>"),
-    "carried": Option(str, None, placeholder="<name>_all.csv"),
-    "causal_fraction": Option(float, EffectTargets.causal_fraction, ge=0.0, le=1.0),
-    "non_causal_fraction": Option(float, EffectTargets.non_causal_fraction, ge=0.0, le=1.0),
-    "train_gap_points": Option(float, EffectTargets.train_gap_points, ge=0.0),
+    "runs": Option(list, placeholder="<dir>|[<dir>,...]", help="the folder(s) of runs to report"),
+    "out": Option(str, None, placeholder="<runs>/report", help="where the report is written"),
+    "name": Option(str, None, placeholder="<env name>", help="the report's file name"),
+    "command": Option(str, None, placeholder="<the file's earlier command>", help="the command recorded as regenerating the runs"),
+    "carried": Option(str, None, placeholder="<name>_all.csv", help="an earlier report's rows kept for algorithms not below runs"),
+    "causal_fraction": Option(float, EffectTargets.causal_fraction, ge=0.0, le=1.0, help="effect check threshold"),
+    "non_causal_fraction": Option(float, EffectTargets.non_causal_fraction, ge=0.0, le=1.0, help="effect check threshold"),
+    "train_gap_points": Option(float, EffectTargets.train_gap_points, ge=0.0, help="effect check threshold"),
 }
+EXAMPLE = "python -m torchrl_causal.report runs=runs/rovermaze_u out=runs/rovermaze_u/report"
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    args = parse_arguments("report", argv_or_sys(argv), OPTIONS)
+    args = parse_arguments("report", argv_or_sys(argv), OPTIONS, about=__doc__, example=EXAMPLE)
     targets = EffectTargets(**{key: args.pop(key) for key in TARGET_KEYS})
     with one_line_errors():
         report = write_report(
