@@ -170,3 +170,41 @@ def test_an_internal_schema_is_no_algo_choice() -> None:
     # Hydra's line after "Available options in 'algo':" lists them, one per line, then its search path
     listed = str(refused.value).split("Available options in 'algo':", 1)[1].split("Config search path", 1)[0]
     assert sorted(listed.split()) == sorted(entry.name for entry in ALGORITHMS)
+
+
+def test_a_run_root_on_a_file_system_that_stores_no_files_is_refused_in_one_line() -> None:
+    import shutil
+
+    from torchrl_causal.experiment import ConfigValueError, compose_config
+    from torchrl_causal.lifecycle import run
+
+    if not Path("/proc").is_dir() or shutil.disk_usage("/proc").total != 0:
+        pytest.skip("no procfs here")
+    cfg = compose_config([*TINY, "run_root=/proc/torchrl_causal_runs"])
+    with pytest.raises(ConfigValueError, match=r"lies below /proc, on a file system that stores no files .*choose another run_root$"):
+        run(cfg)
+    assert not Path("/proc/torchrl_causal_runs").exists()
+
+
+def test_a_checkpoint_that_cannot_be_written_is_one_line_naming_it(tmp_path: Path, monkeypatch) -> None:
+    import torch
+
+    from torchrl_causal.cli.arguments import one_line_errors
+    from torchrl_causal.errors import TorchRLCausalError
+    from torchrl_causal.experiment.run_directory import CheckpointWriteError, atomic_save
+
+    def full_disk(obj, file):  # what torch.save raises when a write fails (disk full, file size limit)
+        Path(file).write_bytes(b"partial")
+        raise RuntimeError("[enforce fail at inline_container.cc:672] . unexpected pos 3456 vs 3344")
+
+    monkeypatch.setattr(torch, "save", full_disk)
+    target = tmp_path / "checkpoints" / "last.pt"
+    target.parent.mkdir()
+    with pytest.raises(CheckpointWriteError) as refused:  # the library's own refusal, an OSError naming the file
+        atomic_save({"x": 1}, target)
+    assert isinstance(refused.value, TorchRLCausalError) and refused.value.filename == str(target)
+    with pytest.raises(SystemExit) as stop, one_line_errors():
+        atomic_save({"x": 1}, target)
+    assert str(stop.value.code).startswith(f"error: {target}: cannot write this checkpoint (a full disk or a file size limit?)")
+    assert "\n" not in str(stop.value.code)
+    assert list(target.parent.iterdir()) == []  # no partial file left behind
