@@ -130,9 +130,12 @@ def _stop(exit_codes: list[int | None]) -> None:
 
 
 #: Its settings are environment variables (the demo takes no arguments); ``--help`` says so.
-ABOUT = (__doc__ or "").split("\n\n")[
-    0
-] + " Takes no arguments; the environment sets DEMO_RUN_ROOT (default runs/demo) and DEMO_WORKERS (default: 2, or fewer cores)."
+ABOUT = " ".join(
+    [
+        (__doc__ or "").split("\n\n")[0],
+        "Takes no arguments; the environment sets DEMO_RUN_ROOT (default runs/demo) and DEMO_WORKERS (default: 2, or fewer cores).",
+    ]
+)
 
 
 def main(argv: Sequence[str] | None = None) -> None:
