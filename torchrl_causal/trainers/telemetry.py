@@ -12,6 +12,13 @@ since its first start, attempts before a resume included. These are measurements
 machine, not results: unlike every other scalar they differ between two runs of the same
 config.
 
+The wall time is not the attempts' cost that ``code.json`` records
+(:class:`~torchrl_causal.experiment.provenance.AttemptClock`: each ended attempt's whole
+wall and CPU time, none for one killed outright): it is the time the run took to reach the
+progress it stands at. ``status.json`` holds it as of the last checkpoint, so a resumed run
+goes on from the time of the checkpoint it resumed from, and the work an interrupted
+attempt did after that checkpoint, lost with it, is not counted.
+
 Examples:
     >>> from omegaconf import OmegaConf
     >>> flat_config(OmegaConf.create({"algo": {"name": "bc", "lr": 1e-3, "drop": [], "x": None}, "seed": 0}))
