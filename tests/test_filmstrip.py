@@ -98,5 +98,5 @@ def test_cli_draws_one_row_per_run_from_the_same_start(tmp_path, capsys):
     frames = iio.imread(videos / "Expert.gif", index=None)
     assert np.abs(frames[0].astype(int) - starts[1].astype(int)).mean() < 3  # GIF's palette: close, not equal
     assert frames.shape[0] == len(filmstrip_of_run(expert.run_dir, frames=1000, every=15, size=32).frames)
-    with pytest.raises(SystemExit, match="format=avi is not one of png, mp4, gif"):
+    with pytest.raises(SystemExit, match="format='avi' must be one of png, mp4, gif"):
         main([f"runs=[{bc.run_dir}]", f"out={videos}", "format=avi"])

@@ -48,6 +48,14 @@ def test_slurm_launcher_composes_with_requeue_and_the_runs_cores() -> None:
     assert _launcher("hydra.launcher.timeout_min=90").hydra.launcher.timeout_min == 90
 
 
+def test_a_job_asks_a_gpu_only_for_a_cuda_run() -> None:
+    compose_config()  # registers the schemas and resolvers
+    assert _launcher("device=cuda").hydra.launcher.gpus_per_node == 1
+    assert _launcher("device=cuda:1").hydra.launcher.gpus_per_node == 1
+    assert _launcher("device=cpu").hydra.launcher.gpus_per_node is None  # no --gpus-per-node line
+    assert _launcher().hydra.launcher.gpus_per_node is None  # the default device is the CPU
+
+
 def test_fake_sbatch_receives_a_sane_job(tmp_path: Path) -> None:
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
@@ -69,6 +77,7 @@ def test_fake_sbatch_receives_a_sane_job(tmp_path: Path) -> None:
         "hydra/launcher=slurm",
         "hydra.launcher.partition=gpu",
         "hydra.launcher.timeout_min=240",
+        "device=cuda",  # the submitting node needs no GPU: each job checks its own
         "threads=2",
         "collector_workers=2",
         "env=route_choice",
@@ -85,3 +94,22 @@ def test_fake_sbatch_receives_a_sane_job(tmp_path: Path) -> None:
     # The job runs the interpreter that submitted it (the venv's), through submitit.
     assert f"{sys.executable} -u -m submitit.core._submit" in script
     assert not list((tmp_path / "runs").rglob("status.json"))  # nothing ran
+
+
+def test_without_sbatch_the_sweep_is_refused_in_one_line(tmp_path: Path) -> None:
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    python = Path(sys.executable)
+    env = {
+        **os.environ,
+        # the interpreter's folder and the system's, where no sbatch is: as on a machine with no cluster
+        "PATH": os.pathsep.join([str(python.parent), "/usr/bin", "/bin"]),
+        "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
+    }
+    assert not any((Path(folder) / "sbatch").exists() for folder in env["PATH"].split(os.pathsep))
+    command = [sys.executable, "-m", "torchrl_causal.train", "-m", "hydra/launcher=slurm", "env=route_choice", "algo=bc"]
+    done = subprocess.run([*command, f"run_root={tmp_path / 'runs'}"], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr[-3000:]
+    assert len(lines) == 1 and "sbatch, which is not on PATH" in lines[0] and "hydra/launcher=processes" in lines[0]
+    assert not (tmp_path / "runs").exists()

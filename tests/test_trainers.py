@@ -43,6 +43,7 @@ from torchrl_causal.experiment.run_directory import carry_runs
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.lifecycle import run
 from torchrl_causal.trainers import Trainer
+from torchrl_causal.trainers.telemetry import SPEED_PREFIX
 
 TINY = [*QUICK, "eval.trajectories=2"]
 ENV_TINY = {"rovermaze_u": ROVER, "route_choice": ["env=route_choice"]}
@@ -360,12 +361,22 @@ def test_interrupt_at_a_random_step_then_resume_equals_an_uninterrupted_run(tmp_
     assert results_a["deploy"].returns == results_b["deploy"].returns
     curves = [read_scalar_csv(Path(cfg.run_dir) / "logs/scalars/eval/train_return.csv") for cfg in (straight, interrupted)]
     assert curves[0] == curves[1]
-    # Every logged scalar too: losses averaged on the device across the interrupt included.
+    # Every logged scalar too: losses averaged on the device across the interrupt included;
+    # the speed measurements at the same steps (their values are the machine's).
     logs = [
         {path.relative_to(Path(cfg.run_dir)): read_scalar_csv(path) for path in (Path(cfg.run_dir) / "logs/scalars").rglob("*.csv")}
         for cfg in (straight, interrupted)
     ]
-    assert logs[0] == logs[1] and len(logs[0]) > 2
+    speed = {path for path in logs[0] if path.parts[2] == SPEED_PREFIX.strip("/")}
+    assert speed and logs[0].keys() == logs[1].keys()
+    assert {path: [step for step, _ in logs[0][path]] for path in speed} == {path: [step for step, _ in logs[1][path]] for path in speed}
+    assert {path: series for path, series in logs[0].items() if path not in speed} == {
+        path: series for path, series in logs[1].items() if path not in speed
+    }
+    assert len(logs[0]) - len(speed) > 2
+    # the wall time goes on from the interrupted attempt's: it counts both attempts
+    wall = [dict(logs[1][path]) for path in speed if path.name == "wall_time_s.csv"][0]
+    assert list(wall.values()) == sorted(wall.values())
     # One attempt per start: the straight run's, and the interrupted run's two.
     attempts = [RunDirectory(cfg.run_dir).read_attempts() for cfg in (straight, interrupted)]
     assert [a["progress"] for a in attempts[0]] == [0]

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -165,12 +166,23 @@ def _remove_new_run(run_dir: RunDirectory, created: Path) -> None:
 
 
 def _check_run_root(run_dir: Path) -> None:
-    """Refuses a run directory below a file (``run_root=<a file>``) before anything is made."""
+    """Refuses, before anything is made, a run directory below a file (``run_root=<a file>``),
+    below a folder this user cannot write to, or on a file system that holds no files
+    (``/proc``, ``/sys``: they report 0 bytes in all, so no disk estimate can be compared)."""
     for folder in (run_dir, *run_dir.parents):
         if folder.exists():
             if not folder.is_dir():
                 raise ConfigValueError(
                     f"run_root / run_dir {run_dir} lies below {folder}, which is a file, not a folder: choose another run_root"
+                )
+            if shutil.disk_usage(folder).total == 0:
+                raise ConfigValueError(
+                    f"run_root / run_dir {run_dir} lies below {folder}, on a file system that stores no files "
+                    "(as /proc and /sys): choose another run_root"
+                )
+            if not os.access(folder, os.W_OK | os.X_OK):
+                raise ConfigValueError(
+                    f"run_root / run_dir {run_dir} lies below {folder}, which this user cannot write to: choose another run_root"
                 )
             return
 

@@ -1,10 +1,12 @@
 """The command lines, each a thin ``main`` over library functions; no command line imports
-another. ``torchrl-causal <command> [args]`` (the console script) and
-``python -m torchrl_causal.<command> [args]`` run the same ``main``.
+another. ``torchrl-causal <command> [args]`` (the console script),
+``python -m torchrl_causal.cli <command> [args]`` and ``python -m torchrl_causal.<command> [args]``
+run the same ``main``.
 
 Commands: ``train`` (Hydra overrides: ``env=rovermaze_u algo=bc ...``), ``evaluate``,
 ``report``, ``status``, ``archive``, ``demo``, ``filmstrip`` and ``strength_ablation``
-(``key=value`` arguments; each prints its usage on a missing or unknown key).
+(``key=value`` arguments; each prints its usage on a missing or unknown key). Each answers
+``--help`` with its options, their defaults and an example; ``help <command>`` does too.
 
 Examples:
     >>> main(["help"])  # doctest: +ELLIPSIS
@@ -37,6 +39,8 @@ COMMANDS = (
 USAGE = (
     "usage: torchrl-causal <command> [args]\n"
     f"commands: {', '.join(COMMANDS)}\n"
+    "the same: python -m torchrl_causal.cli <command> [args], python -m torchrl_causal.<command> [args]\n"
+    "torchrl-causal <command> --help (or: torchrl-causal help <command>) lists a command's options and defaults\n"
     "e.g. torchrl-causal train env=rovermaze_u algo=bc; torchrl-causal evaluate run_dir=<dir>"
 )
 
@@ -48,6 +52,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         SystemExit: with the usage, when no command or an unknown one is named.
     """
     args = list(sys.argv[1:] if argv is None else argv)
+    if args[:1] in (["help"], ["-h"], ["--help"]) and len(args) == 2 and args[1] in COMMANDS:
+        args = [args[1], "--help"]  # help <command>: that command's help
     if not args or args[0] in ("help", "-h", "--help"):
         print(USAGE)
         return
@@ -57,10 +63,6 @@ def main(argv: Sequence[str] | None = None) -> None:
     module = importlib.import_module(f"torchrl_causal.cli.{command}")
     if command == "train":  # Hydra's main reads its overrides from sys.argv
         sys.argv = [f"torchrl-causal {command}", *rest]
-        module.main()
-    elif command == "demo":
-        if rest:
-            raise SystemExit(f"demo takes no arguments, got {rest}")
-        module.main()
+        module.entry_point()
     else:
         module.main(rest)

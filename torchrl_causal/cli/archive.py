@@ -31,15 +31,16 @@ from torchrl_causal.experiment.run_directory import carry_runs
 __all__ = ["OPTIONS", "main"]
 
 OPTIONS: dict[str, Option] = {
-    "runs": Option(str, placeholder="<dir>"),
-    "out": Option(str, placeholder="<dir>"),
-    "policies": Option(bool, False),
-    "carry": Option(bool, False),
+    "runs": Option(str, placeholder="<dir>", help="the folder of runs to archive"),
+    "out": Option(str, placeholder="<dir>", help="where the archive goes (the same relative paths)"),
+    "policies": Option(bool, False, help="copy each run's selected policy too"),
+    "carry": Option(bool, False, help="copy every run with a checkpoint, whole but for its replay buffer"),
 }
+EXAMPLE = "python -m torchrl_causal.archive runs=runs/table3 out=results/runs/table3"
 
 
 def main(argv: Sequence[str] | None = None) -> list[Path]:
-    args = parse_arguments("archive", argv_or_sys(argv), OPTIONS)
+    args = parse_arguments("archive", argv_or_sys(argv), OPTIONS, about=__doc__, example=EXAMPLE)
     with one_line_errors():
         if args["carry"] and args["policies"]:
             raise InvalidValueError("carry=true copies every checkpoint already; leave out policies=true")

@@ -1,7 +1,9 @@
 """``key=value`` arguments of the command lines, typed and checked, and one-line errors.
 
 Every command line but ``train`` (which Hydra parses against the config schema) declares
-its arguments as :class:`Option` s; :func:`parse_arguments` refuses an unknown or missing
+its arguments as :class:`Option` s; :func:`parse_arguments` answers ``--help`` (``-h``,
+``help``) with the command's help (:func:`help_text`: what it does, each option with its
+default, one example) and exit status 0, and refuses an unknown, missing or repeated
 argument with the command's usage line and a value of the wrong type or out of range with
 one line naming it, before anything is read or written. :func:`one_line_errors` turns the
 faults a user can cause and fix (a missing or corrupted file, a bad value found later) into
@@ -21,6 +23,10 @@ Examples:
     Traceback (most recent call last):
     ...
     SystemExit: error: regime='foo' must be one of train, deploy
+    >>> parse_arguments("demo", ["runs=r", "episodes=4", "episodes=8"], options)
+    Traceback (most recent call last):
+    ...
+    SystemExit: error: episodes is given twice (episodes=4, then episodes=8): give it once
 """
 
 from __future__ import annotations
@@ -39,12 +45,14 @@ from omegaconf.errors import OmegaConfBaseException
 from torchrl_causal.errors import InvalidTypeError
 
 __all__ = [
+    "HELP_FLAGS",
     "REQUIRED",
     "OneLineParser",
     "Option",
     "argv_or_sys",
     "bounded",
     "count",
+    "help_text",
     "non_negative",
     "non_negative_number",
     "positive_number",
@@ -56,6 +64,9 @@ __all__ = [
 
 #: The default of an argument that must be given.
 REQUIRED: Any = object()
+
+#: What asks a command for its help instead of running it.
+HELP_FLAGS = ("--help", "-h", "help")
 
 
 @dataclass(frozen=True)
@@ -70,6 +81,7 @@ class Option:
         choices: the allowed values.
         item: the kind of a list's items.
         placeholder: what the usage line shows for the value.
+        help: what the option sets (one line of the command's ``--help``).
     """
 
     kind: type
@@ -79,15 +91,75 @@ class Option:
     choices: tuple[Any, ...] = ()
     item: type = str
     placeholder: str = ""
+    help: str = ""
+
+    def shown(self, name: str) -> str:
+        """The value the usage line shows: the default, or a placeholder."""
+        if self.placeholder:
+            return self.placeholder
+        if self.default in (REQUIRED, None):
+            return f"<{name}>"
+        if isinstance(self.default, bool):
+            return str(self.default).lower()
+        if isinstance(self.default, list):
+            return "[" + ",".join(map(str, self.default)) + "]"
+        return str(self.default)
 
     def usage(self, name: str) -> str:
-        shown = self.placeholder or (f"<{name}>" if self.default in (REQUIRED, None) else str(self.default))
-        return f"{name}={shown}" if self.default is REQUIRED else f"[{name}={shown}]"
+        return f"{name}={self.shown(name)}" if self.default is REQUIRED else f"[{name}={self.shown(name)}]"
+
+    def accepts(self) -> str:
+        """What values it takes, in words (``an integer >= 1``, ``one of train, deploy``)."""
+        kind = _KIND_NAMES[self.kind] if self.kind is not list else f"a list of {_KIND_NAMES[self.item].split(' ', 1)[-1]}s"
+        if self.choices:
+            kind = f"one of {', '.join(map(str, self.choices))}"
+        bounds = [f">= {self.ge:g}" if self.ge is not None else "", f"<= {self.le:g}" if self.le is not None else ""]
+        return " ".join([kind, *filter(None, bounds)])
 
 
 def usage(command: str, options: Mapping[str, Option]) -> str:
     """The usage line of ``python -m torchrl_causal.<command>``."""
     return f"usage: python -m torchrl_causal.{command} " + " ".join(option.usage(name) for name, option in options.items())
+
+
+def _first_paragraph(doc: str) -> str:
+    """A module docstring's first paragraph as plain text (one line, no reST markup)."""
+    paragraph = doc.strip().split("\n\n")[0]
+    return " ".join(paragraph.replace("``", "").replace(":func:", "").replace(":mod:", "").split())
+
+
+def help_text(command: str, options: Mapping[str, Option], about: str = "", example: str = "") -> str:
+    """The answer to ``python -m torchrl_causal.<command> --help``: the usage line, what the
+    command does (``about``: its module docstring, of which the first paragraph is kept), each
+    option with its default and the values it takes, and ``example``.
+
+    Examples:
+        >>> print(help_text("status", {"runs": Option(str, placeholder="<dir>", help="the folder of runs")},
+        ...                 "Where the runs stand.", "python -m torchrl_causal.status runs=runs"))
+        usage: python -m torchrl_causal.status runs=<dir>
+        <BLANKLINE>
+        Where the runs stand.
+        <BLANKLINE>
+        options (key=value; [...] ones are optional, shown with their default):
+          runs=<dir>  (required) the folder of runs; a string
+        <BLANKLINE>
+        example: python -m torchrl_causal.status runs=runs
+    """
+    lines = [usage(command, options), ""]
+    if about:
+        lines += [_first_paragraph(about), ""]
+    if options:
+        width = max(len(f"{name}={option.shown(name)}") for name, option in options.items())
+        lines.append("options (key=value; [...] ones are optional, shown with their default):")
+        for name, option in options.items():
+            described = "; ".join(filter(None, [option.help, option.accepts()]))
+            required = "(required) " if option.default is REQUIRED else ""
+            lines.append(f"  {f'{name}={option.shown(name)}':<{width}}  {required}{described}")
+    else:
+        lines.append("options: none")
+    if example:
+        lines += ["", f"example: {example}"]
+    return "\n".join(lines)
 
 
 _KIND_NAMES = {int: "an integer", float: "a number", bool: "true or false", str: "a string", list: "a list [a,b,...]"}
@@ -148,14 +220,27 @@ def refuse_repeated_keys(argv: Sequence[str]) -> None:
         seen[key] = argument
 
 
-def parse_arguments(command: str, argv: Sequence[str], options: Mapping[str, Option]) -> dict[str, Any]:
+def parse_arguments(
+    command: str, argv: Sequence[str], options: Mapping[str, Option], *, about: str = "", example: str = ""
+) -> dict[str, Any]:
     """The typed value of every option (its default when not given).
 
+    Args:
+        command: the command's name (``python -m torchrl_causal.<command>``).
+        argv: its ``key=value`` arguments.
+        options: what it takes.
+        about, example: what ``--help`` says the command does, and one command line
+            (see :func:`help_text`).
+
     Raises:
-        SystemExit: with the usage line for an unknown or missing argument or a malformed
-            one; with one line naming the argument for a value of the wrong type or out
-            of range, or for a key given twice (:func:`refuse_repeated_keys`).
+        SystemExit: status 0 after printing the help, for ``--help``, ``-h`` or ``help``;
+            with the usage line for an unknown or missing argument or a malformed one;
+            with one line naming the argument for a value of the wrong type or out of
+            range, or for a key given twice (:func:`refuse_repeated_keys`).
     """
+    if any(argument in HELP_FLAGS for argument in argv):
+        print(help_text(command, options, about, example))
+        raise SystemExit(0)
     line = usage(command, options)
     refuse_repeated_keys(argv)
     try:

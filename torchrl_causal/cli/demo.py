@@ -27,9 +27,11 @@ import logging
 import os
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from torchrl_causal.cli.arguments import argv_or_sys, parse_arguments
 from torchrl_causal.cli.filmstrip import episode_of_run
 from torchrl_causal.evaluation import aggregate, effect_checks, load_runs, write_report
 from torchrl_causal.evaluation.rendering import EpisodeOutcome, rendered_episode
@@ -175,7 +177,17 @@ def _stop(exit_codes: list[int | None]) -> None:
     raise SystemExit(max(codes))
 
 
-def main() -> None:
+#: Its settings are environment variables (the demo takes no arguments); ``--help`` says so.
+ABOUT = " ".join(
+    [
+        (__doc__ or "").split("\n\n")[0],
+        "Takes no arguments; the environment sets DEMO_RUN_ROOT (default runs/demo) and DEMO_WORKERS (default: 2, or fewer cores).",
+    ]
+)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parse_arguments("demo", argv_or_sys(argv), {}, about=ABOUT, example="make demo  # or: DEMO_WORKERS=1 python -m torchrl_causal.demo")
     try:
         _demo()
     except KeyboardInterrupt:  # outside the runs: reading them back, writing the report

@@ -35,19 +35,20 @@ from torchrl_causal.lifecycle import DEFAULT_THREADS, REGIMES, evaluate_run, eva
 __all__ = ["OPTIONS", "main"]
 
 OPTIONS: dict[str, Option] = {
-    "run_dir": Option(str),
-    "regime": Option(str, "deploy", choices=REGIMES),
-    "episodes": Option(int, 1000, ge=1),
-    "num_envs": Option(int, None, ge=1, placeholder="<the run's eval.num_envs>"),
-    "seed": Option(int, 30_000, ge=0),
-    "confounding_strength": Option(float, None, ge=0.0, le=1.0, placeholder="<the run's>"),
-    "trajectories": Option(int, 0, ge=0),
-    "save": Option(bool, True),
-    "reuse": Option(bool, False),
-    "device": Option(str, None, placeholder="<the run's, else cpu>"),
-    "threads": Option(int, DEFAULT_THREADS, ge=1),
-    "run_root": Option(str, "runs"),
+    "run_dir": Option(str, placeholder="<dir>", help="the run directory (holding config.yaml and checkpoints/best.pt)"),
+    "regime": Option(str, "deploy", choices=REGIMES, help="the regime to evaluate in"),
+    "episodes": Option(int, 1000, ge=1, help="episodes to run"),
+    "num_envs": Option(int, None, ge=1, placeholder="<the run's eval.num_envs>", help="episodes run at once"),
+    "seed": Option(int, 30_000, ge=0, help="the evaluation seed"),
+    "confounding_strength": Option(float, None, ge=0.0, le=1.0, placeholder="<the run's>", help="the deployment shift"),
+    "trajectories": Option(int, 0, ge=0, help="episodes whose positions are kept"),
+    "save": Option(bool, True, help="write the record to <run_dir>/eval/ (below run_root for a run not ours to write into)"),
+    "reuse": Option(bool, False, help="read back a record of the same settings instead of evaluating"),
+    "device": Option(str, None, placeholder="<the run's, else cpu>", help="where the policy runs"),
+    "threads": Option(int, DEFAULT_THREADS, ge=1, help="torch threads"),
+    "run_root": Option(str, "runs", help="a run not ours to write into gets its record in <run_root>/evaluated/"),
 }
+EXAMPLE = "python -m torchrl_causal.evaluate run_dir=runs/rovermaze_u/h1000-cs1.0-k10/c_bc/seed0 regime=deploy episodes=200"
 
 
 def _pm(mean: float, spread: float, digits: int = 1) -> str:
@@ -58,7 +59,7 @@ def _pm(mean: float, spread: float, digits: int = 1) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> EvaluationResult:
-    args = parse_arguments("evaluate", argv_or_sys(argv), OPTIONS)
+    args = parse_arguments("evaluate", argv_or_sys(argv), OPTIONS, about=__doc__, example=EXAMPLE)
     torch.set_num_threads(args.pop("threads"))
     with one_line_errors(CheckpointError):
         result = evaluate_run(**args)

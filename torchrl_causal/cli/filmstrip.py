@@ -16,25 +16,38 @@ offscreen GL context (EGL on a headless machine, or ``MUJOCO_GL=osmesa``).
 from __future__ import annotations
 
 import re
-import sys
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from omegaconf import OmegaConf
 from torchrl.envs import EnvBase
 
-from torchrl_causal.cli.arguments import one_line_errors
+from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
 from torchrl_causal.evaluation.metrics import Policy
 from torchrl_causal.evaluation.rendering import Filmstrip, RenderingUnavailable, record_filmstrip, save_filmstrips
 from torchrl_causal.evaluation.video import VIDEO_FORMATS, RecordedVideo, record_video
 from torchrl_causal.experiment import CheckpointError
-from torchrl_causal.lifecycle import open_run
+from torchrl_causal.lifecycle import REGIMES, open_run
 
-__all__ = ["episode_of_run", "filmstrip_of_run", "main", "video_of_run"]
+__all__ = ["OPTIONS", "episode_of_run", "filmstrip_of_run", "main", "video_of_run"]
 
-_ARGS = {"runs", "labels", "out", "regime", "seed", "frames", "every", "size", "camera", "format", "fps"}
+# Bounded here so that a bad value is refused before any run is opened (record_filmstrip and
+# record_video check theirs again, for callers of the library).
+OPTIONS: dict[str, Option] = {
+    "runs": Option(list, placeholder="[<dir>,...]", help="the run directories, one row (or video) each"),
+    "out": Option(str, placeholder="<png, or a folder for videos>", help="the PNG file, or the folder that gets one video per run"),
+    "labels": Option(list, None, placeholder="<the runs>", help="each run's row label (and video file name)"),
+    "format": Option(str, "png", choices=("png", *VIDEO_FORMATS), help="a frame strip, or videos"),
+    "regime": Option(str, "deploy", choices=REGIMES, help="the regime of the episode"),
+    "seed": Option(int, 0, ge=0, help="the episode's seed, the same for every run"),
+    "frames": Option(int, 6, ge=2, help="frames kept per strip (png)"),
+    "every": Option(int, None, ge=1, placeholder="<10 (png), 1 (videos)>", help="one frame every this many steps"),
+    "fps": Option(int, 30, ge=1, help="frames per second (videos)"),
+    "size": Option(int, 240, ge=1, help="frame width and height in pixels"),
+    "camera": Option(str, None, placeholder="<above the whole maze>", help="an MJCF camera, e.g. track"),
+}
+EXAMPLE = "python -m torchrl_causal.filmstrip runs=[runs/a/c_sqil/seed0,runs/a/sqil/seed0] labels=[C-SQIL,SQIL] out=strip.png"
 
 
 @contextmanager
@@ -99,43 +112,31 @@ def _record_all(runs: list[str], labels: list[str], record: Callable[[str, str],
 def main(argv: Sequence[str] | None = None) -> Path:
     """The command line (see the module docstring); a missing run, a broken checkpoint or an
     env that cannot render stops with one line."""
+    args = parse_arguments("filmstrip", argv_or_sys(argv), OPTIONS, about=__doc__, example=EXAMPLE)
     with one_line_errors(CheckpointError, RenderingUnavailable):
-        return _main(argv)
+        return _main(args)
 
 
-def _main(argv: Sequence[str] | None) -> Path:
-    args = OmegaConf.from_cli(list(sys.argv[1:] if argv is None else argv))
-    unknown = set(args) - _ARGS
-    if unknown or "runs" not in args or "out" not in args:
-        raise SystemExit(
-            "usage: python -m torchrl_causal.filmstrip runs=[<dir>,...] out=<png, or a folder for videos> "
-            "[labels=[...]] [format=png|mp4|gif] [regime=deploy] [seed=0] [frames=6] [every=10 (png), "
-            "1 (videos)] [fps=30] [size=240] [camera=<name>]" + (f"; unknown argument(s) {sorted(unknown)}" if unknown else "")
-        )
-    runs = [str(run) for run in args.runs]
-    labels = [str(label) for label in args.get("labels", runs)]
+def _main(args: dict[str, Any]) -> Path:
+    runs = args["runs"]
+    labels = args["labels"] or runs
     if len(labels) != len(runs):
-        raise SystemExit(f"labels names {len(labels)} rows for {len(runs)} runs")
-    fmt = str(args.get("format", "png"))
-    if fmt not in ("png", *VIDEO_FORMATS):
-        raise SystemExit(f"format={fmt} is not one of png, {', '.join(VIDEO_FORMATS)}")
-    episode = {key: args[key] for key in ("regime", "seed", "every", "size", "camera") if key in args}
+        raise SystemExit(f"error: labels names {len(labels)} rows for {len(runs)} runs")
+    fmt = args["format"]
+    # every's default is the recorder's own (10 for a strip, 1 for a video)
+    episode = {key: args[key] for key in ("regime", "seed", "every", "size", "camera") if args[key] is not None}
     if fmt == "png":
-        strips = _record_all(
-            runs, labels, lambda label, run: filmstrip_of_run(run, **episode, **({"frames": args.frames} if "frames" in args else {}))
-        )
-        path = save_filmstrips(strips, args.out)
+        strips = _record_all(runs, labels, lambda label, run: filmstrip_of_run(run, **episode, frames=args["frames"]))
+        path = save_filmstrips(strips, args["out"])
         print(f"wrote {path}")
         return path
-    folder = Path(args.out)
+    folder = Path(args["out"])
     if len({_file_name(label) for label in labels}) != len(labels):
-        raise SystemExit(f"labels {labels} do not give one file name each")
+        raise SystemExit(f"error: labels {labels} do not give one file name each")
     _record_all(
         runs,
         labels,
-        lambda label, run: video_of_run(
-            run, folder / f"{_file_name(label)}.{fmt}", **episode, **({"fps": args.fps} if "fps" in args else {})
-        ),
+        lambda label, run: video_of_run(run, folder / f"{_file_name(label)}.{fmt}", **episode, fps=args["fps"]),
     )
     print(f"wrote {len(runs)} {fmt} file(s) to {folder}")
     return folder

@@ -37,15 +37,16 @@ __all__ = ["OPTIONS", "TABLE1_OPTIONS", "main", "table1_main"]
 
 TARGET_KEYS = ("causal_fraction", "non_causal_fraction", "train_gap_points")
 OPTIONS: dict[str, Option] = {
-    "runs": Option(list, placeholder="<dir>|[<dir>,...]"),
-    "out": Option(str, None, placeholder="<runs>/report"),
-    "name": Option(str, None, placeholder="<env name>"),
-    "command": Option(str, None, placeholder="<the file's earlier command>"),
-    "carried": Option(str, None, placeholder="<name>_all.csv"),
-    "causal_fraction": Option(float, EffectTargets.causal_fraction, ge=0.0, le=1.0),
-    "non_causal_fraction": Option(float, EffectTargets.non_causal_fraction, ge=0.0, le=1.0),
-    "train_gap_points": Option(float, EffectTargets.train_gap_points, ge=0.0),
+    "runs": Option(list, placeholder="<dir>|[<dir>,...]", help="the folder(s) of runs to report"),
+    "out": Option(str, None, placeholder="<runs>/report", help="where the report is written"),
+    "name": Option(str, None, placeholder="<env name>", help="the report's file name"),
+    "command": Option(str, None, placeholder="<the file's earlier command>", help="the command recorded as regenerating the runs"),
+    "carried": Option(str, None, placeholder="<name>_all.csv", help="an earlier report's rows kept for algorithms not below runs"),
+    "causal_fraction": Option(float, EffectTargets.causal_fraction, ge=0.0, le=1.0, help="effect check threshold"),
+    "non_causal_fraction": Option(float, EffectTargets.non_causal_fraction, ge=0.0, le=1.0, help="effect check threshold"),
+    "train_gap_points": Option(float, EffectTargets.train_gap_points, ge=0.0, help="effect check threshold"),
 }
+EXAMPLE = "python -m torchrl_causal.report runs=runs/rovermaze_u out=runs/rovermaze_u/report"
 
 
 TABLE1_OPTIONS: dict[str, Option] = {
@@ -80,7 +81,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     if arguments[:1] == ["table1"]:
         table1_main(arguments[1:])
         return
-    args = parse_arguments("report", arguments, OPTIONS)
+    args = parse_arguments("report", arguments, OPTIONS, about=__doc__, example=EXAMPLE)
     targets = EffectTargets(**{key: args.pop(key) for key in TARGET_KEYS})
     with one_line_errors():
         report = write_report(

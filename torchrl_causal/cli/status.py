@@ -43,7 +43,8 @@ from torchrl_causal.experiment.run_directory import CONFIG_FILE, RunDirectory
 
 __all__ = ["OPTIONS", "run_statuses", "status_markdown", "main"]
 
-OPTIONS: dict[str, Option] = {"runs": Option(str, placeholder="<dir>")}
+OPTIONS: dict[str, Option] = {"runs": Option(str, placeholder="<dir>", help="the folder whose run directories are listed")}
+EXAMPLE = "python -m torchrl_causal.status runs=runs"
 
 COLUMNS = ("run", "status", "progress", "attempts", "cost (wall / CPU)", "best train return", "train success %", "deploy success %")
 
@@ -155,7 +156,7 @@ def status_markdown(rows: Sequence[dict[str, str]]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    args = parse_arguments("status", argv_or_sys(argv), OPTIONS)
+    args = parse_arguments("status", argv_or_sys(argv), OPTIONS, about=__doc__, example=EXAMPLE)
     with one_line_errors():
         rows = run_statuses(args["runs"])
     print(status_markdown(rows) if rows else f"no run directories below {args['runs']}")

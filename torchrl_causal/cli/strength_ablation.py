@@ -43,16 +43,23 @@ __all__ = ["OPTIONS", "PAPER_STRENGTHS", "strength_ablation", "strength_markdown
 
 PAPER_STRENGTHS: tuple[float, ...] = (0.15, 0.5, 0.85, 1.0)  # Appendix F's strength ablation
 OPTIONS: dict[str, Option] = {
-    "runs": Option(str, placeholder="<dir>"),
+    "runs": Option(str, placeholder="<dir>", help="the folder of one setting's trained runs"),
     "strengths": Option(
-        list, list(PAPER_STRENGTHS), ge=0.0, le=1.0, item=float, placeholder="[" + ",".join(map(str, PAPER_STRENGTHS)) + "]"
+        list,
+        list(PAPER_STRENGTHS),
+        ge=0.0,
+        le=1.0,
+        item=float,
+        placeholder="[" + ",".join(map(str, PAPER_STRENGTHS)) + "]",
+        help="the deployment shifts to evaluate at",
     ),
-    "episodes": Option(int, 1000, ge=1),
-    "seed": Option(int, 30_000, ge=0),
-    "out": Option(str, None, placeholder="<runs>/report"),
-    "name": Option(str, "strength_ablation"),
-    "threads": Option(int, DEFAULT_THREADS, ge=1),
+    "episodes": Option(int, 1000, ge=1, help="episodes per run and strength"),
+    "seed": Option(int, 30_000, ge=0, help="the evaluation seed"),
+    "out": Option(str, None, placeholder="<runs>/report", help="where the table and figure go"),
+    "name": Option(str, "strength_ablation", help="their file name"),
+    "threads": Option(int, DEFAULT_THREADS, ge=1, help="torch threads"),
 }
+EXAMPLE = "python -m torchrl_causal.strength_ablation runs=runs/rovermaze_medium/h1000-cs1.0-k10 episodes=200"
 log = logging.getLogger(__name__)
 
 
@@ -122,7 +129,7 @@ def strength_markdown(records: Sequence[RunRecord]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> Path:
     cli = argv_or_sys(argv)
-    args = parse_arguments("strength_ablation", cli, OPTIONS)
+    args = parse_arguments("strength_ablation", cli, OPTIONS, about=__doc__, example=EXAMPLE)
     torch.set_num_threads(args["threads"])  # see torchrl_causal.lifecycle
     out = Path(args["out"] or Path(args["runs"]) / "report")
     path = out / f"{args['name']}.md"

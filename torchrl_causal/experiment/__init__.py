@@ -18,6 +18,7 @@ from torchrl_causal.experiment.config import CONFIG_DIR, compose_config
 from torchrl_causal.experiment.interrupts import RunInterrupted
 from torchrl_causal.experiment.run_directory import (
     CheckpointError,
+    CheckpointWriteError,
     ConfigMismatchError,
     ForeignFilesError,
     RunDirectory,
@@ -30,6 +31,7 @@ from torchrl_causal.experiment.schema import ConfigValueError, validate_config
 __all__ = [
     "CONFIG_DIR",
     "CheckpointError",
+    "CheckpointWriteError",
     "ConfigMismatchError",
     "ConfigValueError",
     "ForeignFilesError",

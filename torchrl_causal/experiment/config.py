@@ -77,12 +77,29 @@ def rows(which: str) -> str:
     return row_names(ROW_SETS[which])
 
 
-_RESOLVERS: dict[str, Callable[..., Any]] = {"run_label": run_label, "stable_id": stable_id, "product": product, "rows": rows}
+def gpus_for(device: str) -> int | None:
+    """``${gpus_for:${device}}``: the GPUs a SLURM job of a run on ``device`` asks for: one for
+    CUDA, none (``None``: no ``--gpus-per-node`` line) for the CPU or any other device.
+
+    Examples:
+        >>> gpus_for("cuda"), gpus_for("cuda:1"), gpus_for("cpu"), gpus_for("auto")
+        (1, 1, None, None)
+    """
+    return 1 if str(device).split(":")[0] == "cuda" else None
+
+
+_RESOLVERS: dict[str, Callable[..., Any]] = {
+    "run_label": run_label,
+    "stable_id": stable_id,
+    "product": product,
+    "rows": rows,
+    "gpus_for": gpus_for,
+}
 
 
 def register_resolvers() -> None:
     """Registers ``${run_label:algo,causal,window_matched,drop}``, ``${stable_id:...}``,
-    ``${product:...}``, ``${rows:...}`` and the schemas (idempotent)."""
+    ``${product:...}``, ``${rows:...}``, ``${gpus_for:...}`` and the schemas (idempotent)."""
     for name, resolver in _RESOLVERS.items():
         if not OmegaConf.has_resolver(name):
             OmegaConf.register_new_resolver(name, resolver)

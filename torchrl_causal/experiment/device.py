@@ -30,6 +30,7 @@ __all__ = [
     "PRECISIONS",
     "DeviceCheck",
     "PolicyOnDevice",
+    "SlurmCheck",
     "bf16_unavailable",
     "compile_unavailable",
     "for_cpu_env",
@@ -192,6 +193,11 @@ def resolve_device(spec: str | torch.device) -> torch.device:
     return device
 
 
+def _slurm_launcher(config: DictConfig) -> bool:
+    """Whether a multirun's launcher sends its jobs to SLURM (``hydra/launcher=slurm``)."""
+    return "slurm" in str(OmegaConf.select(config, "hydra.launcher._target_", default="")).lower()
+
+
 class DeviceCheck(Callback):
     """Hydra callback: a multirun refuses an unavailable ``cfg.device`` before Hydra makes
     the sweep folder.
@@ -207,13 +213,26 @@ class DeviceCheck(Callback):
     """
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        launcher = str(OmegaConf.select(config, "hydra.launcher._target_", default=""))
-        if "slurm" in launcher.lower():
+        if _slurm_launcher(config):
             return
         try:
             resolve_device(str(config.device))
         except ValueError as err:
             raise SystemExit(f"Error: {err}") from err
+
+
+class SlurmCheck(Callback):
+    """Hydra callback: a multirun through the SLURM launcher (``hydra/launcher=slurm``) is
+    refused in one line, before Hydra makes the sweep folder, on a machine without
+    ``sbatch``: submitit would fail later with a long traceback.
+    """
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        if _slurm_launcher(config) and shutil.which("sbatch") is None:
+            raise SystemExit(
+                "error: hydra/launcher=slurm submits each job with sbatch, which is not on PATH here: run the sweep "
+                "on the cluster's login node, or on this machine with hydra/launcher=processes"
+            )
 
 
 class PolicyOnDevice(TensorDictModuleBase):

@@ -204,7 +204,10 @@ def free_disk(path: str | os.PathLike) -> int:
 
 
 def _size(count: int) -> str:
-    return f"{count / GB:.1f} GB" if count >= GB // 10 else f"{count / (1 << 20):.1f} MB"
+    # a small estimate in kB: "0.0 MB" would read as nothing at all
+    if count >= GB // 10:
+        return f"{count / GB:.1f} GB"
+    return f"{count / (1 << 20):.1f} MB" if count >= (1 << 20) // 10 else f"{count / 1024:.1f} kB"
 
 
 def _largest(items: dict[str, int], count: int = 3) -> str:

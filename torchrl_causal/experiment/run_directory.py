@@ -39,6 +39,7 @@ killed run leaves no stale lock behind.
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import hashlib
 import json
@@ -72,6 +73,7 @@ __all__ = [
     "RUNTIME_KEYS",
     "RUN_ENTRIES",
     "CheckpointError",
+    "CheckpointWriteError",
     "ConfigMismatchError",
     "ForeignFilesError",
     "RunFileError",
@@ -210,6 +212,11 @@ class CheckpointError(TorchRLCausalError, RuntimeError):
     """A checkpoint that cannot be read or does not belong to this run."""
 
 
+class CheckpointWriteError(TorchRLCausalError, OSError):
+    """A checkpoint that cannot be written (a full disk, a file size limit): an ``OSError``
+    whose ``filename`` is the checkpoint's path, so a command's one line names it."""
+
+
 class RunFileError(TorchRLCausalError, ValueError):
     """A file of a run directory that does not parse (truncated, edited, or not the run's)."""
 
@@ -321,9 +328,20 @@ def atomic_write_text(path: Path, text: str) -> None:
 
 def atomic_save(obj: Any, path: Path) -> None:
     """``torch.save`` to a temporary file in the same folder, then rename over ``path``:
-    an interrupted save leaves the previous checkpoint intact."""
+    an interrupted save leaves the previous checkpoint intact.
+
+    Raises:
+        CheckpointWriteError: naming ``path``, when the file cannot be written (a full disk,
+            a file size limit): torch reports those as a ``RuntimeError`` that names no file.
+    """
     tmp = _temporary(path)
-    torch.save(obj, tmp)
+    try:
+        torch.save(obj, tmp)
+    except (OSError, RuntimeError) as error:
+        tmp.unlink(missing_ok=True)
+        reason = (str(error).splitlines() or [type(error).__name__])[0]
+        message = f"cannot write this checkpoint (a full disk or a file size limit?): {reason}"
+        raise CheckpointWriteError(errno.EIO, message, str(path)) from error
     os.replace(tmp, path)
 
 

@@ -30,7 +30,9 @@ import dataclasses
 import difflib
 import enum
 import math
+import os
 import typing
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Optional
 
@@ -67,6 +69,7 @@ __all__ = [
     "algo_schema_of",
     "register_configs",
     "validate_config",
+    "wandb_login_found",
 ]
 
 
@@ -362,13 +365,16 @@ class WandbLoggerConfig(LoggerConfig):
 
 
 #: Schema of each ``conf/logger`` option that has keys beyond ``LoggerConfig``'s, stored
-#: in the ``logger`` group as ``schema_<name>``.
+#: as ``hydra/schema/logger/<name>`` (see :func:`register_configs`).
 LOGGER_SCHEMAS: dict[str, type[LoggerConfig]] = {"wandb": WandbLoggerConfig}
+
+#: The ``_target_`` of ``logger=wandb`` (whose online mode needs a login).
+WANDB_TARGET = "torchrl.record.loggers.WandbLogger"
 
 #: The optional package each logger needs (``_target_`` -> the ``logger=`` option and the module).
 LOGGER_MODULES: dict[str, tuple[str, str]] = {
     "torchrl.record.loggers.TensorboardLogger": ("tensorboard", "tensorboard"),
-    "torchrl.record.loggers.WandbLogger": ("wandb", "wandb"),
+    WANDB_TARGET: ("wandb", "wandb"),
 }
 
 
@@ -476,7 +482,7 @@ class Config:
 
 
 #: The schemas of the ``conf/algo`` options (an algorithm names its own in
-#: :mod:`torchrl_causal.algorithms`), stored in the ``algo`` group as ``schema_<name>``.
+#: :mod:`torchrl_causal.algorithms`), stored as ``hydra/schema/algo/<name>`` (see :func:`register_configs`).
 ALGO_SCHEMAS: dict[str, type[AlgoConfig]] = {
     "expert": AlgoConfig,
     "bc": BCConfig,
@@ -503,17 +509,28 @@ def algo_schema_of(cfg: DictConfig) -> type:
     return schema
 
 
+#: Where the group schemas are stored in Hydra's ConfigStore (no option of any group).
+SCHEMA_GROUP = "hydra/schema"
+
+
 def register_configs() -> None:
     """Stores the schemas in Hydra's ConfigStore (idempotent): ``schema`` for the top
-    level, ``schema_<algo>`` in the ``algo`` group; and the ``row`` group, one option per
-    :data:`~torchrl_causal.algorithms.ROWS` entry, which sets the algorithm, ``causal``
-    and the window."""
+    level, ``hydra/schema/algo/<algo>`` and ``hydra/schema/logger/<logger>`` (each
+    ``conf/algo/<algo>.yaml`` lists its schema first in its defaults, ``@_here_``); and the
+    ``row`` group, one option per :data:`~torchrl_causal.algorithms.ROWS` entry, which sets
+    the algorithm, ``causal`` and the window.
+
+    The schemas live below ``hydra/`` so that they are no option of the ``algo`` and
+    ``logger`` groups: Hydra lists every option of a group in ``train --help`` and in its
+    "Available options" line, and ``algo=schema_bc`` (a schema with no values) would be
+    offered there and then fail. Groups below ``hydra/`` are Hydra's own, left out of both.
+    """
     store = ConfigStore.instance()
     store.store(name="schema", node=Config)
     for name, schema in ALGO_SCHEMAS.items():
-        store.store(group="algo", name=f"schema_{name}", node=schema)
+        store.store(group=f"{SCHEMA_GROUP}/algo", name=name, node=schema)
     for name, logger_schema in LOGGER_SCHEMAS.items():
-        store.store(group="logger", name=f"schema_{name}", node=logger_schema)
+        store.store(group=f"{SCHEMA_GROUP}/logger", name=name, node=logger_schema)
     for row in ROWS:
         defaults = [{"override /algo": row.algorithm}, {"override /window": row.window}, "_self_"]
         store.store(group="row", name=row.name, package="_global_", node={"defaults": defaults, "causal": row.causal})
@@ -660,12 +677,41 @@ def _check_extras(cfg: DictConfig) -> None:
         choice, module = LOGGER_MODULES[cfg.logger._target_]
         if message := missing_extra(f"logger={choice}", module):
             raise ConfigValueError(message)
+    if cfg.logger._target_ == WANDB_TARGET and not cfg.logger.offline and not wandb_login_found():
+        raise ConfigValueError(
+            "logger.offline=false logs to W&B online, but no W&B login was found (run `wandb login` or set "
+            "WANDB_API_KEY); leave logger.offline=true to log offline and `wandb sync` the run later"
+        )
     if message := source_problem(cfg.demos.source):
         raise ConfigValueError(message)
     if cfg.eval.video:
         fmt = VideoFormat(cfg.eval.video_format)
         if message := missing_extra(f"eval.video={cfg.eval.video} ({fmt.value})", "imageio", *(("av",) if fmt is VideoFormat.mp4 else ())):
             raise ConfigValueError(message)
+
+
+def wandb_login_found(environ: Mapping[str, str] | None = None) -> bool:
+    """Whether W&B can log online without asking for a key: ``WANDB_API_KEY`` is set, the
+    environment asks W&B for an offline or disabled mode anyway, or the netrc file (where
+    ``wandb login`` writes the key) holds one for W&B's host.
+
+    Examples:
+        >>> wandb_login_found({"WANDB_API_KEY": "0123"}), wandb_login_found({"WANDB_MODE": "offline", "NETRC": "/nonexistent"})
+        (True, True)
+        >>> wandb_login_found({"NETRC": "/nonexistent"})
+        False
+    """
+    import netrc
+    from urllib.parse import urlparse
+
+    environ = os.environ if environ is None else environ
+    if environ.get("WANDB_API_KEY") or environ.get("WANDB_MODE") in ("offline", "dryrun", "disabled"):
+        return True
+    host = urlparse(environ.get("WANDB_BASE_URL", "https://api.wandb.ai")).hostname or "api.wandb.ai"
+    try:
+        return netrc.netrc(environ.get("NETRC") or None).authenticators(host) is not None
+    except (OSError, netrc.NetrcParseError):
+        return False
 
 
 def validate_config(cfg: DictConfig) -> None:

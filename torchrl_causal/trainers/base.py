@@ -43,6 +43,7 @@ from torchrl_causal.experiment.run_directory import TRAIN_CURVE, ConfigMismatchE
 from torchrl_causal.experiment.timing import timed
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.progress import progress
+from torchrl_causal.trainers.telemetry import SpeedMeter, log_config
 
 __all__ = ["Score", "Trainer"]
 
@@ -122,6 +123,11 @@ class Trainer(ABC):
         self.last_evaluated: int | None = None
         self.stopped = False  # set by a subclass that ends early (BC's early stopping)
         self.logger: Logger | None = None
+        # What the speed scalars count: subclasses add the env steps and gradient updates
+        # each train_step makes (counts of this process only; nothing resumes from them).
+        self.env_steps_done = 0
+        self.updates_done = 0
+        self.speed: SpeedMeter | None = None
         self._last_checkpoint = time.monotonic()
 
     @classmethod
@@ -211,6 +217,7 @@ class Trainer(ABC):
         torch.set_rng_state(state["torch_rng"].cpu())
 
     def write_status(self, status: str) -> None:
+        speed = {} if self.speed is None else {"wall_time_s": round(self.speed.wall_time_s, 3)}
         self.run.write_status(
             status,
             progress=self.progress,
@@ -218,6 +225,7 @@ class Trainer(ABC):
             unit=self.unit,
             best_progress=self.best_progress,
             best_train_return=self.best_return,
+            **speed,
         )
 
     def save_checkpoint(self) -> None:
@@ -262,7 +270,8 @@ class Trainer(ABC):
         """Scores the policy; keeps the best one; checkpoints the run."""
         with timed("evaluation"):
             result = self.evaluate(self.policy)
-        self._log({TRAIN_CURVE: result.return_mean, "eval/train_success": result.success_rate}, self.progress)
+        speed = {} if self.speed is None else self.speed.read()
+        self._log({TRAIN_CURVE: result.return_mean, "eval/train_success": result.success_rate, **speed}, self.progress)
         self.last_evaluated = self.progress
         if self._selection_key(result.success_rate, result.return_mean) > self._selection_key(self.best_success, self.best_return):
             self.best_return, self.best_success, self.best_progress = result.return_mean, result.success_rate, self.progress
@@ -307,9 +316,13 @@ class Trainer(ABC):
         with timed("setup"):
             self.setup()
             resumed = self._resume()
+        # The wall time of the attempts before this one: status.json holds it as of the checkpoint resumed from.
+        self.speed = SpeedMeter(float(self.run.read_status().get("wall_time_s") or 0.0) if resumed else 0.0)
         self.logger = instantiate(self.cfg.logger)(log_dir=str(self.run.path))
         if resumed:
             log.info("resumed %s at %d %s", self.run.path, self.progress, self.unit)
+        else:
+            log_config(self.logger, self.cfg)  # once per run: a resumed W&B run keeps its config
         identity = attempt_identity(
             source_checksum(self.cfg.demos.source, self.cfg.demos.path), self.cfg.compile, self.device, precision=self.precision
         )
@@ -331,6 +344,11 @@ class Trainer(ABC):
             self.close()
             self.logger.close()  # flushes; W&B finishes its run (a resume continues it), TensorBoard closes its file
 
+    def _count_speed(self, seconds: float, counted_before: tuple[int, int]) -> None:
+        if self.speed is not None:
+            env_steps, updates = self.env_steps_done - counted_before[0], self.updates_done - counted_before[1]
+            self.speed.add(seconds, env_steps, updates)
+
     def _loop(self, label: str) -> None:
         every = self.cfg.algo.eval_every
         with (
@@ -338,8 +356,10 @@ class Trainer(ABC):
             deferred_signals() as signals,
         ):
             while self.progress < self.total and not self.stopped:
-                before = self.progress
+                before, counted = self.progress, (self.env_steps_done, self.updates_done)
+                started = time.monotonic()
                 scalars = self.train_step()
+                self._count_speed(time.monotonic() - started, counted)
                 bar.update(self.progress - before)
                 if scalars:
                     read = {name: float(value) for name, value in scalars.items()}  # the one device read per log

@@ -106,6 +106,7 @@ class BCTrainer(Trainer):
                 loss.backward()
                 self.optimizer.step()
                 losses.append(loss.detach())
+        self.updates_done += len(losses)
         with timed("evaluation"):
             val = self.validation_loss()
         if val < self.best_val_loss:

@@ -113,6 +113,7 @@ class GAILTrainer(Trainer):
             loss.backward()
             self.discriminator_optimizer.step()
             losses.append(loss.detach())
+        self.updates_done += len(losses)
         return torch.stack(losses).mean()
 
     def _update_policy(self, rollout: TensorDictBase) -> dict[str, torch.Tensor]:
@@ -133,10 +134,12 @@ class GAILTrainer(Trainer):
             for key in ("loss_objective", "loss_critic", "loss_entropy", "clip_fraction"):
                 sums[key] = sums.get(key, 0.0) + out[key].detach()
             count += 1
+        self.updates_done += count
         return {f"train/{k}": v / count for k, v in sums.items()}
 
     def train_step(self) -> Mapping[str, torch.Tensor]:
         rollout = next(self.rollouts)  # [episodes_per_round, horizon], time last
+        self.env_steps_done += rollout.numel()
         policy_rows = self.discriminator_rows(rollout.reshape(-1).select(*TRANSITION_KEYS))
         scalars = {
             "train/env_reward_per_step": rollout["next", "reward"].mean(),

@@ -297,6 +297,7 @@ class OffPolicyILTrainer(Trainer):
             self.refill_policy_buffer()
         transitions = self._collect()
         self.progress += transitions.numel()
+        self.env_steps_done += transitions.numel()
         self.scalar_sums[0] += transitions["next", "reward"].mean()
         self.batches_since_log += 1
         owed = self.updates_due(self.progress) - self.update.updates
@@ -307,6 +308,7 @@ class OffPolicyILTrainer(Trainer):
             for _ in range(owed):
                 self.scalar_sums[1:] += self.update(self.sample_batch())
                 self.updates_since_log += 1
+        self.updates_done += max(owed, 0)
         due = self.updates_since_log >= self.log_every or self.update.updates == 0 or self.progress >= self.total
         return self._scalar_means() if due else {}
 
