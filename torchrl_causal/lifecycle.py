@@ -14,6 +14,7 @@ the training step in flight, checkpoints, marks the run interrupted and raises
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 from collections.abc import Iterator
@@ -27,6 +28,7 @@ from omegaconf import DictConfig
 from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.data.demonstrations import DatasetError
+from torchrl_causal.envs.base import REGIMES
 from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.metrics import EvaluationResult
@@ -58,8 +60,6 @@ __all__ = [
 log = logging.getLogger("torchrl_causal")
 
 register_resolvers()
-
-REGIMES = ("train", "deploy")
 
 
 @contextmanager
@@ -111,10 +111,13 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
     validate_config(cfg)
     _check_run_root(Path(cfg.run_dir))
     RunDirectory(cfg.run_dir).check_owned()  # a folder of the user's own files is neither cleared nor written into
-    check_run_fits(cfg)  # before the window: a long one takes long to build
     trainer_class: type[Trainer] | None = get_class(cfg.algo.trainer) if cfg.algo.trainer else None
+    # The run's one window, built on first use (by the memory check when window.k is small, which
+    # refuses a run too large before a long window is built) and handed to the trainer and the evaluator.
+    run_window = functools.cache(lambda: make_window(cfg))
+    check_run_fits(cfg, run_window if trainer_class else None)
+    window = run_window() if trainer_class else None
     total = trainer_class.budget(cfg) if trainer_class else 0
-    window = make_window(cfg) if trainer_class else None
     run_dir = RunDirectory(cfg.run_dir)
     created = _first_missing(run_dir.path)  # what a failure before any checkpoint removes
     if trainer_class is not None and created is not None:
