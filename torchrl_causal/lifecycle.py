@@ -28,7 +28,7 @@ from omegaconf import DictConfig
 from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.data.demonstrations import DatasetError
-from torchrl_causal.envs.base import REGIMES
+from torchrl_causal.envs.base import REGIMES, validate_strength
 from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.metrics import EvaluationResult
@@ -299,8 +299,8 @@ def _check_evaluation(regime: str, episodes: int, num_envs: int | None, trajecto
     for name, value, least in (("episodes", episodes, 1), ("num_envs", num_envs, 1), ("trajectories", trajectories, 0)):
         if value is not None and int(value) < least:
             raise InvalidValueError(f"{name}={value} is out of range: it must be >= {least}")
-    if confounding_strength is not None and not 0.0 <= float(confounding_strength) <= 1.0:
-        raise InvalidValueError(f"confounding_strength={confounding_strength} is out of range: it must lie in [0, 1]")
+    if confounding_strength is not None:
+        validate_strength(confounding_strength)
 
 
 #: The package's own results tree (a git checkout's ``results/``): shipped runs and policies, never written by a command.
