@@ -82,7 +82,7 @@ OLD_PATHS = {
     "torchrl_causal.experts.locomotion.finish_skill_run": "torchrl_causal.experts.skill_run.finish_skill_run",
     "torchrl_causal.experts.locomotion.upright_speed": "torchrl_causal.experts.skill_run.upright_speed",
     "torchrl_causal.experiment.builders.RelaxedBinaryAction": "torchrl_causal.transforms.actions.RelaxedBinaryAction",
-    "torchrl_causal.cli.arguments.OneLineParser": "torchrl_causal.arguments.OneLineParser",
+    "torchrl_causal.cli.arguments.OneLineParser": "torchrl_causal.command_line.OneLineParser",
 }
 
 

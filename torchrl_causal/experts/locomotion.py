@@ -47,7 +47,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 from torchrl.objectives import SACLoss, SoftUpdate
 
-from torchrl_causal.arguments import non_negative, positive_number
+from torchrl_causal.command_line import non_negative, positive_number
 from torchrl_causal.envs.ant import LOCOMOTION_OBSERVATION_DIM, AntLocomotionEnv
 from torchrl_causal.envs.humanoid import HUMANOID_SKILL_OBSERVATION_DIM, HumanoidLocomotionEnv
 from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv

@@ -44,7 +44,7 @@ from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOpe
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
-from torchrl_causal.arguments import count, non_negative_number, positive_number
+from torchrl_causal.command_line import count, non_negative_number, positive_number
 from torchrl_causal.errors import InvalidTypeError, InvalidValueError
 from torchrl_causal.experiment.run_directory import atomic_save
 from torchrl_causal.experts.locomotion import SKILLS, LocomotionSkill, evaluate_locomotion

@@ -55,7 +55,7 @@ from torchrl.collectors import Collector
 from torchrl.envs import EnvBase
 from torchrl.record.loggers.csv import CSVLogger
 
-from torchrl_causal.arguments import OneLineParser, count, non_negative, one_line_errors
+from torchrl_causal.command_line import OneLineParser, count, non_negative, one_line_errors
 from torchrl_causal.errors import InvalidValueError, TorchRLCausalError
 from torchrl_causal.experiment.run_directory import atomic_save, atomic_write_text, check_owned, foreign_entries, load_checkpoint
 from torchrl_causal.progress import progress
