@@ -572,14 +572,15 @@ def test_a_shipped_policy_is_evaluated_without_writing_into_the_package(
 
 
 def test_every_benchmark_checks_its_numbers() -> None:
-    """Every benchmark parses its flags with the shared one-line parser, its numbers typed with
-    bounds (a negative count is refused, not timed)."""
-    scripts = sorted((REPO / "benchmarks").glob("*.py"))
+    """Every benchmark and every ``--flags`` command of the package (the skill trainers) parses
+    its flags with the shared one-line parser, its numbers typed with bounds (a negative count
+    is refused, not timed)."""
+    scripts = sorted((REPO / "benchmarks").glob("*.py")) + sorted((REPO / "torchrl_causal").rglob("*.py"))
     with_flags = [path for path in scripts if "add_argument(" in path.read_text()]
-    assert len(with_flags) >= 10
+    assert len(with_flags) >= 12 and {"locomotion.py", "locomotion_ppo.py"} <= {path.name for path in with_flags}
     for path in with_flags:
         text = path.read_text()
-        assert "OneLineParser(" in text and "argparse.ArgumentParser(" not in text, path.name
+        assert ("OneLineParser(" in text or "skill_parser(" in text) and "argparse.ArgumentParser(" not in text, path.name
         assert "type=int" not in text and "type=float" not in text, path.name
 
 

@@ -66,7 +66,7 @@ def test_shipped_configs_name_code_that_resolves() -> None:
     assert not unresolved, unresolved
 
 
-#: The experts' old import paths (archived configs, the results' commands) and where each now lives.
+#: Old import paths (archived configs, the results' commands, other branches) and where each now lives.
 OLD_PATHS = {
     "torchrl_causal.envs.AntMazeExpert": "torchrl_causal.experts.policies.AntMazeExpert",
     "torchrl_causal.envs.HumanoidMazeExpert": "torchrl_causal.experts.policies.HumanoidMazeExpert",
@@ -78,6 +78,11 @@ OLD_PATHS = {
     "torchrl_causal.envs.planner.MazeLayout": "torchrl_causal.envs.maze_layout.MazeLayout",
     "torchrl_causal.envs.locomotion.train_locomotion": "torchrl_causal.experts.locomotion.train_locomotion",
     "torchrl_causal.envs.locomotion_ppo.export_learner": "torchrl_causal.experts.locomotion_ppo.export_learner",
+    # what left the skill trainers for their shared base, and the builders for transforms/
+    "torchrl_causal.experts.locomotion.finish_skill_run": "torchrl_causal.experts.skill_run.finish_skill_run",
+    "torchrl_causal.experts.locomotion.upright_speed": "torchrl_causal.experts.skill_run.upright_speed",
+    "torchrl_causal.experiment.builders.RelaxedBinaryAction": "torchrl_causal.transforms.actions.RelaxedBinaryAction",
+    "torchrl_causal.cli.arguments.OneLineParser": "torchrl_causal.command_line.OneLineParser",
 }
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 import torch
@@ -235,7 +236,7 @@ def test_the_command_line_sets_the_config_it_names(tmp_path, monkeypatch) -> Non
     locomotion_ppo.main([*argv, "--direction-period", "300", "600"])
     assert seen["config"].direction_period == (300, 600)
     assert seen["output"] == tmp_path / "export.pt" and seen["output"] != SKILLS["humanoid"].weights
-    with pytest.raises(ValueError, match="need 0 < gamma < 1"):
+    with pytest.raises(SystemExit, match="^error: need 0 < gamma < 1"):  # one line, no traceback
         locomotion_ppo.main(["--run-dir", str(tmp_path), "--gamma", "1.0"])
 
 
@@ -345,3 +346,72 @@ def test_a_states_current_learner_exports_as_the_run_exports_its_best(tmp_path, 
     assert exported["0.command_frame"].item() == pytest.approx(-math.pi / 2)  # behind the run's frame, as the loader reads it
     with pytest.raises(SystemExit):
         ppo.main(["--export-from", str(tmp_path / "run" / "resume_state.pt")])  # no --output: refused, nothing written
+
+
+def _tree(folder):
+    return {path.relative_to(folder): path.read_bytes() if path.is_file() else None for path in sorted(folder.rglob("*"))}
+
+
+def test_a_folder_of_the_users_own_files_is_refused_by_both_trainers_and_left_as_it_was(tmp_path) -> None:
+    from torchrl_causal.experiment.run_directory import ForeignFilesError
+    from torchrl_causal.experts import locomotion, locomotion_ppo
+
+    mine = tmp_path / "mine"
+    (mine / "buffer.old").mkdir(parents=True)  # named like a run's own entry, but no run's config proves it one
+    (mine / "buffer.old" / "data.bin").write_bytes(b"mine")
+    (mine / "notes.txt").write_text("mine")
+    before = _tree(mine)
+    with pytest.raises(ForeignFilesError, match=r"mine is not a run directory \(it holds buffer.old, notes.txt, which no run wrote\)"):
+        train_locomotion_ppo(mine, _config(FRAMES), progress_bar=False)  # PPO never writes a buffer.old
+    sac = SKILLS["ant"].config(total_steps=200, random_steps=200, hidden=16, buffer_size=400, eval_envs=1, eval_steps=5)
+    with pytest.raises(ForeignFilesError, match=r"\(it holds notes.txt, which"):
+        locomotion.train_locomotion(mine, sac, skill="ant", progress_bar=False)
+    assert _tree(mine) == before
+    (mine / "notes.txt").unlink()
+    before = _tree(mine)
+    with pytest.raises(ForeignFilesError, match=r"it holds buffer.old"):
+        locomotion.train_locomotion(mine, sac, skill="ant", progress_bar=False)
+    with pytest.raises(SystemExit, match=r"^error: .*mine is not a run directory"):  # the command line: one line
+        locomotion_ppo.main(["--run-dir", str(mine), "--steps", "64", "--num-envs", "4", "--rollout-steps", "16", "--minibatch-size", "32"])
+    assert _tree(mine) == before
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "ppo_config.json").write_text("not json")  # another program's file of the config's name
+    with pytest.raises(ForeignFilesError, match=r"it holds ppo_config.json, which no run wrote"):
+        train_locomotion_ppo(other, _config(FRAMES), progress_bar=False)
+    assert _tree(other) == {Path("ppo_config.json"): b"not json"}  # nothing written, nothing removed
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--steps", "-5"],
+        ["--num-envs", "0"],
+        ["--gamma", "nan"],
+        ["--command-spread", "north"],
+        ["--direction-period", "10", "0"],
+        ["--entropy-coeff", "-1"],
+    ],
+)
+def test_bad_flags_are_refused_in_one_line_before_anything_is_written(tmp_path, capsys, argv) -> None:
+    from torchrl_causal.experts import locomotion_ppo
+
+    with pytest.raises(SystemExit) as stop:
+        locomotion_ppo.main(["--run-dir", str(tmp_path / "run"), *argv])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and err.startswith("error: argument ") and err.count("\n") == 1, err
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_run_folder_replaces_only_its_own_entries(tmp_path) -> None:
+    from torchrl_causal.errors import InvalidValueError
+    from torchrl_causal.experts.skill_run import SkillRunDirectory
+
+    run = SkillRunDirectory(tmp_path, "c.json", ("buffer", "buffer.tmp", "buffer.old"))
+    (tmp_path / "buffer").mkdir()
+    (tmp_path / "buffer" / "old.bin").write_bytes(b"old")
+    run.replace_folder("buffer", lambda folder: (folder.mkdir(), (folder / "new.bin").write_bytes(b"new")))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["buffer"] and (tmp_path / "buffer" / "new.bin").read_bytes() == b"new"
+    with pytest.raises(InvalidValueError, match="'data' is not one of"):
+        run.replace_folder("data", lambda folder: folder.mkdir())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["buffer"]

@@ -56,7 +56,7 @@ def test_resume_refuses_another_config_or_skill(tmp_path):
     state_file = tmp_path / "a" / "resume_state.pt"
     with pytest.raises(ValueError, match="updates_per_step"):
         train_locomotion(tmp_path / "b", _config(2 * FRAMES, updates_per_step=1.0), skill="humanoid", output=None, resume_from=state_file)
-    with pytest.raises(ValueError, match="'humanoid' skill, not 'ant'"):
+    with pytest.raises(ValueError, match="SAC 'humanoid' skill, not SAC's 'ant'"):
         train_locomotion(tmp_path / "c", _config(2 * FRAMES), skill="ant", output=None, resume_from=state_file)
     with pytest.raises(FileNotFoundError, match="no checkpoint at .*none.pt"):  # missing, not "corrupted"
         train_locomotion(tmp_path / "d", _config(2 * FRAMES), skill="humanoid", output=None, resume_from=tmp_path / "none.pt")

@@ -1,7 +1,7 @@
 """The run footprint estimate: each item equals the bytes of the tensors it stands for,
-windows too long to build are extrapolated exactly, and a run that would not fit is
-refused by name before anything is allocated (small limits; nothing big is allocated), and
-the whole estimate bounds the measured peak resident size of a real (small) run."""
+long windows are extrapolated exactly, a run builds its window once, a run that would not
+fit is refused by name before anything is allocated (small limits; nothing big is allocated),
+and the whole estimate bounds the measured peak resident size of a real (small) run."""
 
 from __future__ import annotations
 
@@ -120,3 +120,39 @@ def test_the_estimate_bounds_the_measured_peak_of_a_run(tmp_path: Path) -> None:
     growth = peak - base
     assert growth <= estimate - base <= 4 * growth, measured
     assert encoded <= growth, measured
+def _count_windows(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """The ``k`` of every window the package constructs from a config from now on."""
+    from torchrl_causal.experiment import builders
+
+    built: list[int] = []
+    construct = builders.imitator_window
+
+    def counted(template, k, **options):  # type: ignore[no-untyped-def]
+        built.append(k)
+        return construct(template, k, **options)
+
+    monkeypatch.setattr(builders, "imitator_window", counted)
+    return built
+
+
+def test_a_run_builds_its_window_once_for_the_memory_check_the_trainer_and_the_evaluator(tmp_path: Path, monkeypatch) -> None:
+    from tiny_runs import tiny
+
+    from torchrl_causal.lifecycle import run
+
+    built = _count_windows(monkeypatch)
+    cfg = compose_config([*tiny("bc", "algo.epochs=1"), f"run_root={tmp_path}"])
+    run(cfg)
+    assert built == [cfg.window.k]  # one construction, shared by every reader of the run
+    assert Path(cfg.run_dir, "window.json").is_file()  # the trained run's window is the one built
+
+
+def test_a_long_window_is_not_built_by_the_memory_check(monkeypatch) -> None:
+    # window.k > EXACT_K: two fixed-size probes give the width; the run's own window is not
+    # asked for, so a window too large to fit is refused before it is built.
+    built = _count_windows(monkeypatch)
+    asked: list[int] = []
+    cfg = compose_config(["env=rovermaze_u", "algo=bc", "window.k=40", "run_root=/nonexistent/runs"])
+    step = encoded_transition_bytes(cfg, lambda: asked.append(1) or make_window(cfg))
+    assert not asked and built == [EXACT_K // 2, EXACT_K]
+    assert step == measured_transition_bytes(cfg, cfg.window.k)  # the extrapolation is exact

@@ -27,7 +27,7 @@ NAME = PACKAGE.name
 #: stand on the top floor with the README's command paths.
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("errors",),  # every refusal of the package derives from its root
-    ("conf", "extras", "algorithms", "available"),
+    ("conf", "extras", "algorithms", "available", "command_line"),
     ("graphs", "progress", "compat"),
     ("envs",),
     ("modules", "objectives", "transforms", "data"),

@@ -507,9 +507,9 @@ def test_shape_mismatch_is_named():
 
 
 def test_negative_window_size_is_refused():
-    with pytest.raises(ValueError, match="non-negative"):
+    with pytest.raises(ValueError, match="k must be an int >= 0"):
         AdjustmentWindow(k=-1, action="X", lags={})
-    with pytest.raises(ValueError, match="non-negative int, got -1"):
+    with pytest.raises(ValueError, match="k must be an int >= 0, got -1"):
         CausalWindowTransform.from_env(CountingEnv([3]), -1)
 
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 from torchrl_causal.errors import UnknownKeyError
 
-__all__ = ["ALGORITHMS", "Algorithm", "ROWS", "ROW_SETS", "Row", "TABLE1_ROWS", "algorithm", "row_names"]
+__all__ = ["ALGORITHMS", "Algorithm", "ROWS", "ROW_SETS", "Row", "TABLE1_FAMILIES", "TABLE1_ROWS", "algorithm", "row_names"]
 
 
 @dataclass(frozen=True)
@@ -37,11 +37,14 @@ class Algorithm:
         label: its name in tables, without the causal prefix.
         schema: the config schema that types it (a key of
             :data:`~torchrl_causal.experiment.schema.ALGO_SCHEMAS`).
+        off_policy: whether it learns from a replay buffer of its own rollouts (the paper's
+            claim that the causal window recovers the expert is made of these).
     """
 
     name: str
     label: str
     schema: str
+    off_policy: bool = False
 
 
 #: Every algorithm, in the paper's order (the expert first).
@@ -49,9 +52,9 @@ ALGORITHMS: tuple[Algorithm, ...] = (
     Algorithm("expert", "Expert", schema="expert"),
     Algorithm("bc", "BC", schema="bc"),
     Algorithm("gail", "GAIL", schema="gail"),
-    Algorithm("sqil", "SQIL", schema="sqil"),
-    Algorithm("iq_learn", "IQ-Learn", schema="iq_learn"),
-    Algorithm("iq_learn_garg", "IQ-Learn (Garg et al.)", schema="iq_learn"),
+    Algorithm("sqil", "SQIL", schema="sqil", off_policy=True),
+    Algorithm("iq_learn", "IQ-Learn", schema="iq_learn", off_policy=True),
+    Algorithm("iq_learn_garg", "IQ-Learn (Garg et al.)", schema="iq_learn", off_policy=True),
 )
 _BY_NAME = {entry.name: entry for entry in ALGORITHMS}
 
@@ -121,11 +124,15 @@ class Row:
         return cls(name, causal, window_matched, tuple(dropped.split("-")) if dropped else ())
 
 
+#: The algorithm families the paper's Table 1 trains, in its order: each has a causal and a
+#: non-causal row (the tables' effect checks and the figures' panels go by them).
+TABLE1_FAMILIES: tuple[str, ...] = ("bc", "gail", "sqil", "iq_learn")
+
 #: The paper's Table 1, in its order: the expert, the causal algorithms, the same non-causal.
 TABLE1_ROWS: tuple[Row, ...] = (
     Row("expert"),
-    *(Row(name, causal=True) for name in ("bc", "gail", "sqil", "iq_learn")),
-    *(Row(name) for name in ("bc", "gail", "sqil", "iq_learn")),
+    *(Row(name, causal=True) for name in TABLE1_FAMILIES),
+    *(Row(name) for name in TABLE1_FAMILIES),
 )
 
 #: Every row of the ``row`` config group: Table 1's, C-IQ-Learn with Garg et al.'s

@@ -14,6 +14,7 @@ the training step in flight, checkpoints, marks the run interrupted and raises
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import shutil
@@ -28,6 +29,7 @@ from omegaconf import DictConfig
 from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.data.demonstrations import DatasetError
+from torchrl_causal.envs.base import REGIMES, validate_strength
 from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.metrics import EvaluationResult
@@ -62,7 +64,6 @@ log = logging.getLogger("torchrl_causal")
 
 register_resolvers()
 
-REGIMES = ("train", "deploy")
 VIDEO_DIR = "videos"  # <run_dir>/logs/videos/<regime>/episode_<i>.<format> (eval.video)
 
 
@@ -116,12 +117,15 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
     validate_config(cfg)
     _check_run_root(Path(cfg.run_dir))
     RunDirectory(cfg.run_dir).check_owned()  # a folder of the user's own files is neither cleared nor written into
-    check_run_fits(cfg)  # before the window: a long one takes long to build
+    trainer_class: type[Trainer] | None = get_class(cfg.algo.trainer) if cfg.algo.trainer else None
+    # The run's one window, built on first use (by the memory check when window.k is small, which
+    # refuses a run too large before a long window is built) and handed to the trainer and the evaluator.
+    run_window = functools.cache(lambda: make_window(cfg))
+    check_run_fits(cfg, run_window if trainer_class else None)
+    window = run_window() if trainer_class else None
     if cfg.eval.video:
         _check_videos(cfg)  # before training: a machine that cannot draw the env refuses now, not hours later
-    trainer_class: type[Trainer] | None = get_class(cfg.algo.trainer) if cfg.algo.trainer else None
     total = trainer_class.budget(cfg) if trainer_class else 0
-    window = make_window(cfg) if trainer_class else None
     run_dir = RunDirectory(cfg.run_dir)
     created = _first_missing(run_dir.path)  # what a failure before any checkpoint removes
     if trainer_class is not None and created is not None:
@@ -327,8 +331,8 @@ def _check_evaluation(regime: str, episodes: int, num_envs: int | None, trajecto
     for name, value, least in (("episodes", episodes, 1), ("num_envs", num_envs, 1), ("trajectories", trajectories, 0)):
         if value is not None and int(value) < least:
             raise InvalidValueError(f"{name}={value} is out of range: it must be >= {least}")
-    if confounding_strength is not None and not 0.0 <= float(confounding_strength) <= 1.0:
-        raise InvalidValueError(f"confounding_strength={confounding_strength} is out of range: it must lie in [0, 1]")
+    if confounding_strength is not None:
+        validate_strength(confounding_strength)
 
 
 #: The package's own results tree (a git checkout's ``results/``): shipped runs and policies, never written by a command.

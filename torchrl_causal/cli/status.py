@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
+from torchrl_causal.envs.base import REGIMES
 from torchrl_causal.errors import InvalidValueError, MissingFileError
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.experiment.provenance import COST_FIELDS, RUNTIME_FIELDS, identity_changes
@@ -128,7 +129,7 @@ def run_statuses(root: str | Path) -> list[dict[str, str]]:
         best = status.get("best_train_return")
         attempts = run.read_attempts()
         # a run training again after its budget was raised still holds the earlier budget's evaluations
-        final = [_success(run, regime) if state == "complete" else "—" for regime in ("train", "deploy")]
+        final = [_success(run, regime) if state == "complete" else "—" for regime in REGIMES]
         rows.append(
             dict(
                 zip(

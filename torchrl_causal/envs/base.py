@@ -59,6 +59,7 @@ __all__ = [
     "PartialStepError",
     "batch_rows",
     "rotate",
+    "validate_strength",
 ]
 
 Regime = Literal["train", "deploy"]
@@ -224,7 +225,21 @@ def _validate_regime(regime: str) -> str:
     return regime
 
 
-def _validate_strength(confounding_strength: float) -> float:
+def validate_strength(confounding_strength: float) -> float:
+    """``confounding_strength`` as a float in ``[0, 1]``: the one rule for the strength, checked
+    where it enters (an env's constructor, an evaluation's override; a config's by its schema).
+
+    Raises:
+        InvalidValueError: naming the value.
+
+    Examples:
+        >>> validate_strength(1)
+        1.0
+        >>> validate_strength(1.5)
+        Traceback (most recent call last):
+        ...
+        torchrl_causal.errors.InvalidValueError: confounding_strength must lie in [0, 1], got 1.5
+    """
     strength = float(confounding_strength)
     if not 0.0 <= strength <= 1.0:
         raise InvalidValueError(f"confounding_strength must lie in [0, 1], got {confounding_strength!r}")
@@ -335,7 +350,7 @@ class ConfoundedEnv(EnvBase):
         device = torch.device("cpu" if device is None else device)
         super().__init__(device=device, batch_size=torch.Size(batch_size))
         self._regime = _validate_regime(regime)
-        self._confounding_strength = _validate_strength(confounding_strength)
+        self._confounding_strength = validate_strength(confounding_strength)
         self._horizon = _validate_horizon(horizon)
         self.rng = torch.Generator(device=device)
         flag_shape = (*self.batch_size, 1)

@@ -20,6 +20,7 @@ from omegaconf import DictConfig, OmegaConf
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs import EnvBase
 
+from torchrl_causal.envs.base import REGIMES
 from torchrl_causal.evaluation.metrics import EpisodeObserver, EvaluationResult, Policy, evaluate_policy
 from torchrl_causal.evaluation.video import EpisodeVideos
 from torchrl_causal.experiment.builders import make_env, make_expert, make_imitator_env, make_policy
@@ -33,7 +34,6 @@ __all__ = ["Evaluator", "maze_geometry", "PERIODIC_EVAL_SEED", "FINAL_EVAL_SEED"
 # Evaluation envs are seeded apart from the training env (and from each other), with the
 # same seed at every periodic evaluation so checkpoints are compared on the same episodes.
 PERIODIC_EVAL_SEED, FINAL_EVAL_SEED = 10_000, 20_000
-REGIMES = ("train", "deploy")
 
 
 def maze_geometry(env: EnvBase) -> dict[str, Any] | None:

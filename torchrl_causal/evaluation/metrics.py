@@ -23,13 +23,39 @@ from torchrl_causal.envs.base import STEP_MASK_KEY
 from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.progress import progress as progress_reporter
 
-__all__ = ["EpisodeObserver", "EvaluationResult", "evaluate_policy"]
+__all__ = ["SUMMARY_COLUMNS", "EpisodeObserver", "EvaluationResult", "evaluate_policy", "metrics_summary"]
 
 Policy = Callable[[TensorDictBase], TensorDictBase]
 
 #: Decimals kept of a recorded trajectory position: plots need far less, and full floats
 #: were three quarters of an evaluation record's size.
 TRAJECTORY_DECIMALS = 4
+
+#: An evaluation's flat metrics, in the results CSV's order (``seeds``: how many training
+#: seeds it pools).
+SUMMARY_COLUMNS: tuple[str, ...] = (
+    "regime",
+    "success_rate",
+    "success_se",
+    "return_mean",
+    "return_std",
+    "ep_len_mean",
+    "ep_len_std",
+    "n_episodes",
+    "seeds",
+)
+
+
+def metrics_summary(result: Any) -> dict[str, float | int | str]:
+    """The :data:`SUMMARY_COLUMNS` of ``result`` (an :class:`EvaluationResult`, or a table row
+    read back with the same metrics), ``seeds`` from its ``seed_count``: every summary the
+    package prints or writes is this one.
+
+    Examples:
+        >>> metrics_summary(EvaluationResult("deploy", [True, False], [-1.0, -9.0], [4, 9], seeds=[0, 0]))["seeds"]
+        1
+    """
+    return {column: getattr(result, "seed_count" if column == "seeds" else column) for column in SUMMARY_COLUMNS}
 
 
 def _mean_std(values: Sequence[float]) -> tuple[float, float]:
@@ -136,19 +162,14 @@ class EvaluationResult:
     def ep_len_std(self) -> float:
         return _mean_std(self.successful_lengths)[1]
 
+    @property
+    def seed_count(self) -> int:
+        """How many training seeds this result pools."""
+        return len(set(self.seeds))
+
     def summary(self) -> dict[str, float | int | str]:
-        """The metrics as a flat mapping (the columns of the results CSV)."""
-        return {
-            "regime": self.regime,
-            "success_rate": self.success_rate,
-            "success_se": self.success_se,
-            "return_mean": self.return_mean,
-            "return_std": self.return_std,
-            "ep_len_mean": self.ep_len_mean,
-            "ep_len_std": self.ep_len_std,
-            "n_episodes": self.n_episodes,
-            "seeds": len(set(self.seeds)),
-        }
+        """The metrics as a flat mapping (the columns of the results CSV: :func:`metrics_summary`)."""
+        return metrics_summary(self)
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)

@@ -16,8 +16,9 @@ matplotlib.use("Agg")  # reports are written on headless machines
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
-from torchrl_causal.algorithms import Row  # noqa: E402
+from torchrl_causal.algorithms import TABLE1_FAMILIES, Row  # noqa: E402
 from torchrl_causal.errors import InvalidValueError
+from torchrl_causal.evaluation.figures import save_figure  # noqa: E402
 from torchrl_causal.evaluation.metrics import EvaluationResult  # noqa: E402
 from torchrl_causal.evaluation.runs import RunRecord, Setting, mean_curve, seed_band  # noqa: E402
 from torchrl_causal.evaluation.seed_statistics import (  # noqa: E402
@@ -37,21 +38,11 @@ __all__ = [
     "BAND",
 ]
 
-_FAMILIES = ("bc", "gail", "sqil", "iq_learn")
 ABLATION_AXES = {"k": "window size k", "horizon": "horizon H", "strength": "confounding strength"}
 
 
 #: What the success curves' band spans: every seed's curve lies inside it.
 BAND = "min-max over seeds"
-
-
-def _save(fig, path: str | Path) -> Path:
-    """Lays ``fig`` out, writes it to ``path`` (PNG, 120 dpi), closes it and returns the path."""
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
 
 
 def _grid(n: int) -> tuple[int, int]:
@@ -69,12 +60,13 @@ def plot_training_curves(runs: Sequence[RunRecord], path: str | Path) -> Path | 
     by_label: dict[str, list[RunRecord]] = defaultdict(list)
     for run in runs:
         by_label[run.label].append(run)
-    families = [f for f in _FAMILIES if any(by_label.get(p) and any(r.curve for r in by_label[p]) for p in (f, f"c_{f}"))]
+    pairs = {family: (Row(family, causal=True).name, family) for family in TABLE1_FAMILIES}  # (causal, non-causal) labels
+    families = [f for f in TABLE1_FAMILIES if any(by_label.get(p) and any(r.curve for r in by_label[p]) for p in pairs[f])]
     if not families:
         return None
     fig, axes = plt.subplots(1, len(families), figsize=(4.2 * len(families), 3.4), squeeze=False)
     for ax, family in zip(axes[0], families):
-        for label, colour in ((f"c_{family}", "tab:blue"), (family, "tab:red")):
+        for label, colour in zip(pairs[family], ("tab:blue", "tab:red")):
             curve = mean_curve(r.curve for r in by_label.get(label, ()))
             if not curve:
                 continue
@@ -85,11 +77,11 @@ def plot_training_curves(runs: Sequence[RunRecord], path: str | Path) -> Path | 
                 value = EvaluationResult.pool(deploy).return_mean
                 ax.scatter([steps[-1]], [value], color=colour, marker="X", s=80, zorder=3, label=f"{display_name(label)} (deploy, final)")
         ax.set_title(display_name(family))
-        units = {r.unit for label in (family, f"c_{family}") for r in by_label.get(label, ()) if r.unit}
+        units = {r.unit for label in pairs[family] for r in by_label.get(label, ()) if r.unit}
         ax.set_xlabel(f"training progress ({' / '.join(sorted(units)) or 'steps'})")
         ax.set_ylabel("evaluation return E[Y]")
         ax.legend(fontsize=7)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _family(label: str) -> str:
@@ -159,7 +151,7 @@ def plot_success_curves(runs: Sequence[RunRecord], path: str | Path) -> Path | N
         ax.set_ylim(-3, 103)
         ax.legend(fontsize=6, loc="best")
     fig.suptitle(f"Success rate of the periodic evaluations: mean over seeds, band {BAND}", fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_aggregate(scores: Sequence[NormalisedScores], path: str | Path, thresholds: Sequence[float] | None = None) -> Path | None:
@@ -214,7 +206,7 @@ def plot_aggregate(scores: Sequence[NormalisedScores], path: str | Path, thresho
         profile.set_ylim(-0.03, 1.03)
         profile.set_title("performance profile", fontsize=10)
         profile.legend(fontsize=7)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _draw_maze(ax, maze: Mapping | None) -> None:
@@ -257,7 +249,7 @@ def plot_trajectories(table_runs: Mapping[str, Sequence[RunRecord]], path: str |
         ax.set_xticks([])
         ax.set_yticks([])
     fig.suptitle(f"{regime}-regime trajectories")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_ablation(
@@ -303,4 +295,4 @@ def plot_ablation(
     if axis == "k" and max(getattr(s, axis) for s in settings) >= 50:
         ax.set_xscale("symlog")
     ax.legend(fontsize=7)
-    return _save(fig, path)
+    return save_figure(fig, path)

@@ -18,6 +18,7 @@ from torchrl.envs import EnvBase, TransformedEnv  # noqa: E402
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp  # noqa: E402
 
 from torchrl_causal.errors import InvalidValueError, RenderingUnavailable
+from torchrl_causal.evaluation.figures import save_figure  # noqa: E402
 from torchrl_causal.evaluation.metrics import Policy  # noqa: E402
 
 __all__ = [
@@ -177,9 +178,4 @@ def save_filmstrips(strips: dict[str, Filmstrip], path: str | Path) -> Path:
                 ax.set_title(f"t = {strip.steps[index]}", fontsize=8)
             else:
                 ax.axis("off")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110)

@@ -20,6 +20,7 @@ from typing import Any, NamedTuple
 
 from omegaconf import OmegaConf
 
+from torchrl_causal.envs.base import REGIMES
 from torchrl_causal.errors import InvalidValueError, MissingFileError
 from torchrl_causal.evaluation.metrics import EvaluationResult
 from torchrl_causal.experiment.run_directory import (
@@ -115,7 +116,7 @@ def load_run(run_dir: str | Path) -> RunRecord:
             raise InvalidValueError(f"{run.config_file} lacks the key {key!r}")
     evaluations: dict[str, EvaluationResult] = {}
     maze = None
-    for path in (run.eval_path(regime) for regime in ("train", "deploy")):
+    for path in (run.eval_path(regime) for regime in REGIMES):
         if not path.is_file():
             continue
         data = run.read_json(path)
@@ -135,9 +136,7 @@ def load_run(run_dir: str | Path) -> RunRecord:
         evaluations=evaluations,
         curve=read_scalar_csv(curve_file) if curve_file.is_file() else (),
         success_curves={
-            regime: read_scalar_csv(run.success_curve_file(regime))
-            for regime in ("train", "deploy")
-            if run.success_curve_file(regime).is_file()
+            regime: read_scalar_csv(run.success_curve_file(regime)) for regime in REGIMES if run.success_curve_file(regime).is_file()
         },
         unit=run.read_status().get("unit", ""),
         maze=maze,
@@ -186,7 +185,7 @@ def _complete_runs(root: Path) -> Iterator[RunDirectory]:
     every other evaluated run is named in a warning."""
     for config_file in sorted(root.rglob(CONFIG_FILE)):
         run = RunDirectory(config_file.parent)
-        if not any(run.eval_path(regime).is_file() for regime in ("train", "deploy")):
+        if not any(run.eval_path(regime).is_file() for regime in REGIMES):
             continue
         status = run.read_status()
         if status.get("status") != "complete":

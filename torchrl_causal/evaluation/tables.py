@@ -17,9 +17,10 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from torchrl_causal.algorithms import TABLE1_ROWS, Row
+from torchrl_causal.algorithms import TABLE1_FAMILIES, TABLE1_ROWS, Row, algorithm
+from torchrl_causal.envs.base import REGIMES
 from torchrl_causal.errors import InvalidValueError
-from torchrl_causal.evaluation.metrics import EvaluationResult
+from torchrl_causal.evaluation.metrics import SUMMARY_COLUMNS, EvaluationResult, metrics_summary
 from torchrl_causal.evaluation.runs import RunRecord, Setting
 from torchrl_causal.evaluation.seed_statistics import bootstrap_interval, interquartile_mean, stratified_bootstrap_interval
 
@@ -53,19 +54,9 @@ __all__ = [
 
 #: Table 1's row labels in its order (:data:`torchrl_causal.algorithms.TABLE1_ROWS`).
 TABLE1_ALGORITHMS: tuple[str, ...] = tuple(row.name for row in TABLE1_ROWS)
-CSV_COLUMNS: tuple[str, ...] = (
-    "algorithm",
-    "regime",
-    "success_rate",
-    "success_se",
-    "return_mean",
-    "return_std",
-    "ep_len_mean",
-    "ep_len_std",
-    "n_episodes",
-    "seeds",
-)
-REGIMES: tuple[str, ...] = ("train", "deploy")
+#: The rows the paper's causal claim is checked on: Table 1's causal off-policy algorithms.
+_CAUSAL_OFF_POLICY: tuple[str, ...] = tuple(Row(name, causal=True).name for name in TABLE1_FAMILIES if algorithm(name).off_policy)
+CSV_COLUMNS: tuple[str, ...] = ("algorithm", *SUMMARY_COLUMNS)
 
 
 @dataclass(frozen=True)
@@ -114,18 +105,8 @@ class ReportedResult:
         )
 
     def summary(self) -> dict[str, float | int | str]:
-        """The metrics as :meth:`EvaluationResult.summary` lists them."""
-        return {
-            "regime": self.regime,
-            "success_rate": self.success_rate,
-            "success_se": self.success_se,
-            "return_mean": self.return_mean,
-            "return_std": self.return_std,
-            "ep_len_mean": self.ep_len_mean,
-            "ep_len_std": self.ep_len_std,
-            "n_episodes": self.n_episodes,
-            "seeds": self.seed_count,
-        }
+        """The metrics as :meth:`EvaluationResult.summary` lists them (:func:`metrics_summary`)."""
+        return metrics_summary(self)
 
 
 # label -> regime -> result pooled over seeds (or an earlier report's row)
@@ -455,7 +436,7 @@ def effect_checks(table: Table, targets: EffectTargets = EffectTargets()) -> lis
 
     expert = rate("expert", "deploy")
     if expert is not None:
-        for label in ("c_sqil", "c_iq_learn"):
+        for label in _CAUSAL_OFF_POLICY:
             value = rate(label, "deploy")
             if value is not None:
                 checks.append(
@@ -466,7 +447,7 @@ def effect_checks(table: Table, targets: EffectTargets = EffectTargets()) -> lis
                         100 * (value - causal_fraction * expert),
                     )
                 )
-        for label in ("bc", "gail", "sqil", "iq_learn"):
+        for label in TABLE1_FAMILIES:
             value = rate(label, "deploy")
             if value is not None:
                 checks.append(
@@ -477,13 +458,14 @@ def effect_checks(table: Table, targets: EffectTargets = EffectTargets()) -> lis
                         100 * (non_causal_fraction * expert - value),
                     )
                 )
-    for label in ("bc", "gail", "sqil", "iq_learn"):
-        plain, causal = rate(label, "train"), rate(f"c_{label}", "train")
+    for label in TABLE1_FAMILIES:
+        causal_label = Row(label, causal=True).name
+        plain, causal = rate(label, "train"), rate(causal_label, "train")
         if plain is not None and causal is not None:
             gap = 100 * (plain - causal)
             checks.append(
                 EffectCheck(
-                    f"{display_name(label)} within {train_gap_points:g} points of {display_name('c_' + label)} (train regime)",
+                    f"{display_name(label)} within {train_gap_points:g} points of {display_name(causal_label)} (train regime)",
                     f"{100 * plain:.1f}% vs {100 * causal:.1f}% ({gap:+.1f} points)",
                     abs(gap) <= train_gap_points,
                     train_gap_points - abs(gap),
@@ -504,7 +486,7 @@ def seed_effect_checks(runs: Iterable[RunRecord], targets: EffectTargets = Effec
     expert_rate = EvaluationResult.pool(expert).success_rate
     rates = _success_by_seed(runs)
     checks = []
-    for label in ("c_sqil", "c_iq_learn"):
+    for label in _CAUSAL_OFF_POLICY:
         by_seed = rates.get(label, {}).get("deploy", {})
         if not by_seed or not expert_rate:
             continue

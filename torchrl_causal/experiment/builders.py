@@ -18,14 +18,13 @@ from hydra.utils import get_object, instantiate
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModuleBase
-from torchrl.data import Binary, Bounded, Composite, TensorSpec
-from torchrl.envs import EnvBase, Transform, TransformedEnv
+from torchrl.data import Binary
+from torchrl.envs import EnvBase, TransformedEnv
 
-from torchrl_causal.errors import InvalidTypeError
 from torchrl_causal.experiment.schema import ConfigValueError, WindowMode
 from torchrl_causal.graphs.template import TimeSliceTemplate
 from torchrl_causal.graphs.window import AdjustmentWindow
-from torchrl_causal.transforms import CausalWindowTransform, causal_template, imitator_window
+from torchrl_causal.transforms import CausalWindowTransform, RelaxedBinaryAction, causal_template, imitator_window
 
 __all__ = [
     "RelaxedBinaryAction",
@@ -53,40 +52,6 @@ TRANSITION_KEYS: tuple = (
     ("next", "done"),
     ("next", "terminated"),
 )
-
-
-class RelaxedBinaryAction(Transform):
-    """Presents a binary action (e.g. Route Choice's X) as a continuous one in ``[0, 1]``.
-
-    The continuous-control actors of every algorithm output a bounded real action; the
-    env receives ``action > 0.5``. This is the algorithms' relaxation, not part of the
-    env's mechanism, so it lives with the trainers.
-
-    Examples:
-        >>> from torchrl_causal.envs import RouteChoiceEnv
-        >>> env = TransformedEnv(RouteChoiceEnv(batch_size=(3,), seed=0), RelaxedBinaryAction())
-        >>> spec = env.action_spec
-        >>> isinstance(spec, Bounded), spec.space.low.unique().item(), spec.space.high.unique().item()
-        (True, 0.0, 1.0)
-        >>> td = env.reset().set("action", torch.tensor([[0.2], [0.7], [0.5]]))
-        >>> env.step(td)["next", "terminated"].shape
-        torch.Size([3, 1])
-    """
-
-    def __init__(self, action_key: str = "action") -> None:
-        super().__init__(in_keys_inv=[action_key], out_keys_inv=[action_key])
-
-    def _inv_apply_transform(self, action: torch.Tensor) -> torch.Tensor:
-        return (action > 0.5).to(action.dtype)
-
-    def transform_action_spec(self, action_spec: TensorSpec) -> TensorSpec:
-        if isinstance(action_spec, Composite):
-            for key in self.in_keys_inv:
-                action_spec[key] = self.transform_action_spec(action_spec[key])
-            return action_spec
-        if not isinstance(action_spec, Binary):
-            raise InvalidTypeError(f"RelaxedBinaryAction expects a Binary action spec, got {type(action_spec).__name__}")
-        return Bounded(0.0, 1.0, shape=action_spec.shape, device=action_spec.device, dtype=torch.float32)
 
 
 def instantiate_with_strings(node: DictConfig) -> Any:

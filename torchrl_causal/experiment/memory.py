@@ -34,6 +34,7 @@ import dataclasses
 import math
 import os
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,6 +45,7 @@ from torchrl.data import Composite, TensorSpec
 from torchrl_causal.available import available_memory
 from torchrl_causal.experiment.builders import make_env, make_imitator_env, make_window
 from torchrl_causal.experiment.schema import EVAL_VIDEO_SIZE, ConfigValueError, GAILConfig, OffPolicyConfig, algo_schema_of
+from torchrl_causal.graphs.window import AdjustmentWindow
 
 __all__ = [
     "GB",
@@ -65,7 +67,9 @@ GB = 1 << 30
 #: Resident memory of a process that imported the package (torch, TorchRL, MuJoCo):
 #: 0.47 GB measured with ``/usr/bin/time -f %M python -c "import torchrl_causal.train"``.
 LIBRARIES_BYTES = GB // 2
-#: Windows up to this many lags are built to measure their width; longer ones are extrapolated.
+#: Windows up to this many lags are measured; a longer one is extrapolated from two probes
+#: of ``EXACT_K // 2`` and ``EXACT_K`` lags, so that a window too large to fit is refused
+#: before it is built.
 EXACT_K = 16
 
 
@@ -124,23 +128,32 @@ def measured_transition_bytes(cfg: DictConfig, k: int) -> int:
     """:func:`transition_bytes` of the imitator env of ``cfg`` with a window of ``k`` lags."""
     small = cfg.copy()
     small.window.k = k
-    env = make_imitator_env(small, make_window(small), "train", 1, cfg.seed)
+    return _imitator_transition_bytes(small, make_window(small))
+
+
+def encoded_transition_bytes(cfg: DictConfig, window: Callable[[], AdjustmentWindow] | None = None) -> int:
+    """:func:`transition_bytes` of the run's imitator env.
+
+    ``window`` gives the run's window (the lifecycle builds it once, cached, and hands the
+    same one to the trainer and the evaluator; built from ``cfg`` when not given). It is
+    asked for only when ``window.k`` is at most :data:`EXACT_K`: past the first few lags every
+    lag holds the same variables, so the width grows linearly in ``k`` and a longer window's
+    is extrapolated exactly from two small probes, and a run whose window would not fit is
+    refused before that window is allocated.
+    """
+    k = cfg.window.k
+    if k <= EXACT_K:
+        return _imitator_transition_bytes(cfg, make_window(cfg) if window is None else window())
+    low, high = measured_transition_bytes(cfg, EXACT_K // 2), measured_transition_bytes(cfg, EXACT_K)
+    return high + (high - low) * (k - EXACT_K) // (EXACT_K - EXACT_K // 2)
+
+
+def _imitator_transition_bytes(cfg: DictConfig, window: AdjustmentWindow) -> int:
+    env = make_imitator_env(cfg, window, "train", 1, cfg.seed)
     try:
         return transition_bytes(env.observation_spec["observation"], env.full_action_spec["action"])
     finally:
         env.close()
-
-
-def encoded_transition_bytes(cfg: DictConfig) -> int:
-    """:func:`transition_bytes` of the run's imitator env, without building its window
-    when ``window.k`` is large: every lag past the first few holds the same variables, so
-    the width grows linearly in ``k`` and is extrapolated from ``k = 8`` and ``k = 16``
-    (a window of ``k`` lags takes O(k^2) to build: 50 s at ``k = 999``)."""
-    k = cfg.window.k
-    if k <= EXACT_K:
-        return measured_transition_bytes(cfg, k)
-    low, high = measured_transition_bytes(cfg, EXACT_K // 2), measured_transition_bytes(cfg, EXACT_K)
-    return high + (high - low) * (k - EXACT_K) // (EXACT_K - EXACT_K // 2)
 
 
 def _video_bytes(cfg: DictConfig) -> dict[str, int]:
@@ -153,8 +166,9 @@ def _video_bytes(cfg: DictConfig) -> dict[str, int]:
     return {"evaluation videos (eval.video x env.horizon / eval.video_every frames)": 2 * count * frames * EVAL_VIDEO_SIZE**2 * 3}
 
 
-def run_footprint(cfg: DictConfig) -> Footprint:
-    """The dominant arrays of a run of ``cfg`` (validated)."""
+def run_footprint(cfg: DictConfig, window: Callable[[], AdjustmentWindow] | None = None) -> Footprint:
+    """The dominant arrays of a run of ``cfg`` (validated) over its ``window`` (see
+    :func:`encoded_transition_bytes`; the expert row has none)."""
     base = make_env(cfg, "train", 1, cfg.seed)
     try:
         raw_step = 2 * spec_bytes(base.full_observation_spec) + spec_bytes(base.full_action_spec)
@@ -163,7 +177,7 @@ def run_footprint(cfg: DictConfig) -> Footprint:
     if not cfg.algo.trainer:  # the expert row only evaluates
         ram = {"libraries": LIBRARIES_BYTES, "evaluation envs (eval.num_envs)": 4 * cfg.eval.num_envs * raw_step}
         return Footprint(ram={**ram, **_video_bytes(cfg)}, disk={})
-    step = encoded_transition_bytes(cfg)
+    step = encoded_transition_bytes(cfg, window)
     algo, schema = cfg.algo, algo_schema_of(cfg)
     demos = _demonstration_transitions(cfg)
     ram = {
@@ -243,10 +257,11 @@ def check_footprint(footprint: Footprint, *, available_ram: int, free_disk: int,
         )
 
 
-def check_run_fits(cfg: DictConfig) -> Footprint:
-    """:func:`check_footprint` of :func:`run_footprint` against this machine (its available
-    memory, or ``cfg.max_memory_gb`` when set, and the free disk below ``cfg.run_dir``)."""
-    footprint = run_footprint(cfg)
+def check_run_fits(cfg: DictConfig, window: Callable[[], AdjustmentWindow] | None = None) -> Footprint:
+    """:func:`check_footprint` of :func:`run_footprint` (over the run's ``window``) against this
+    machine (its available memory, or ``cfg.max_memory_gb`` when set, and the free disk below
+    ``cfg.run_dir``)."""
+    footprint = run_footprint(cfg, window)
     limit = OmegaConf.select(cfg, "max_memory_gb")
     ram = available_memory() if limit is None else int(float(limit) * GB)
     check_footprint(footprint, available_ram=ram, free_disk=free_disk(cfg.run_dir), disk_size=disk_size(cfg.run_dir))

@@ -48,7 +48,7 @@ import os
 import re
 import shutil
 import socket
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, cast
@@ -83,6 +83,8 @@ __all__ = [
     "atomic_write_text",
     "carry_runs",
     "check_copy_targets",
+    "check_owned",
+    "foreign_entries",
     "copy_folders",
     "MOVED_KEYS",
     "MOVED_TARGETS",
@@ -428,6 +430,53 @@ def _json_remedy(path: Path) -> str:
     return "delete it and rerun the command that wrote it (evaluate, or the run's own command), or restore it from an archive"
 
 
+def foreign_entries(
+    folder: Path, entries: Collection[str], marker: Path, is_marker: Callable[[Path], bool], inert: Collection[str] = ()
+) -> list[Path]:
+    """What ``folder`` holds that its program did not write: the package's one rule of ownership,
+    shared by run directories and the skill trainers' run folders.
+
+    A program owns the top-level ``entries`` it writes (and the temporaries an atomic write
+    killed midway leaves), and only in a folder whose ``marker`` file it wrote (``is_marker``
+    tells its own from another program's file of that name). Everything is foreign in a
+    folder that holds more than the ``inert`` entries (a lock) without such a marker: nothing
+    proves it the program's. A missing folder holds nothing foreign.
+
+    Examples:
+        >>> import tempfile
+        >>> folder = Path(tempfile.mkdtemp())
+        >>> _ = (folder / "log.txt").write_text("..."); _ = (folder / "notes.md").write_text("...")
+        >>> [p.name for p in foreign_entries(folder, {"log.txt", "config.json"}, folder / "config.json", Path.is_file)]
+        ['notes.md']
+        >>> (folder / "notes.md").unlink()
+        >>> [p.name for p in foreign_entries(folder, {"log.txt", "config.json"}, folder / "config.json", Path.is_file)]
+        ['log.txt']
+    """
+    if not folder.is_dir():
+        return []
+    found = sorted(folder.iterdir())
+    foreign = [entry for entry in found if entry.name not in entries and not _TEMPORARY.match(entry.name)]
+    if foreign:
+        return foreign
+    written = [entry for entry in found if entry.name not in inert and not _TEMPORARY.match(entry.name)]
+    return written if written and not is_marker(marker) else []
+
+
+def check_owned(folder: Path, foreign: Callable[[], list[Path]], remedy: str) -> None:
+    """Refuses ``folder`` when it is a file or ``foreign()`` (its :func:`foreign_entries`)
+    names anything, naming up to three of them and ``remedy`` (what to do instead).
+
+    Raises:
+        ForeignFilesError: before anything is written or removed.
+    """
+    if folder.exists() and not folder.is_dir():
+        raise ForeignFilesError(f"{folder} is a file, not a run directory: nothing was changed; {remedy}")
+    found = foreign()
+    if found:
+        shown = ", ".join(entry.name for entry in found[:3]) + (f" and {len(found) - 3} more" if len(found) > 3 else "")
+        raise ForeignFilesError(f"{folder} is not a run directory (it holds {shown}, which no run wrote): nothing was changed; {remedy}")
+
+
 class RunDirectory:
     """The files of one run (see the module docstring).
 
@@ -564,10 +613,8 @@ class RunDirectory:
 
     def foreign_entries(self) -> list[Path]:
         """What this folder holds that no run wrote (empty for a run directory, a missing or
-        an empty folder, or one a killed run left with its lock alone).
-
-        Everything in it is foreign when its ``config.yaml`` is missing or not a run's
-        (:func:`is_run_config`) while it holds more than a lock: nothing proves it a run's.
+        an empty folder, or one a killed run left with its lock alone): :func:`foreign_entries`
+        of :data:`RUN_ENTRIES`, proven by a run's ``config.yaml`` (:func:`is_run_config`).
 
         Examples:
             >>> import tempfile
@@ -576,15 +623,7 @@ class RunDirectory:
             >>> [p.name for p in run.foreign_entries()]
             ['thesis.tex']
         """
-        if not self.path.is_dir():
-            return []
-        entries = sorted(self.path.iterdir())
-        foreign = [entry for entry in entries if not self._ours(entry)]
-        if foreign:
-            return foreign
-        if any(entry.name != LOCK_FILE and not _TEMPORARY.match(entry.name) for entry in entries) and not is_run_config(self.config_file):
-            return [entry for entry in entries if entry.name != LOCK_FILE and not _TEMPORARY.match(entry.name)]
-        return []
+        return foreign_entries(self.path, RUN_ENTRIES, self.config_file, is_run_config, inert=(LOCK_FILE,))
 
     def check_owned(self, remedy: str = "choose another run_root or run_name (a missing or empty folder)") -> None:
         """Refuses a folder that holds anything no run wrote (:meth:`foreign_entries`), naming
@@ -593,14 +632,7 @@ class RunDirectory:
         Raises:
             ForeignFilesError: before anything is written or removed.
         """
-        if self.path.exists() and not self.path.is_dir():
-            raise ForeignFilesError(f"{self.path} is a file, not a run directory: nothing was changed; {remedy}")
-        foreign = self.foreign_entries()
-        if foreign:
-            shown = ", ".join(entry.name for entry in foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
-            raise ForeignFilesError(
-                f"{self.path} is not a run directory (it holds {shown}, which no run wrote): nothing was changed; {remedy}"
-            )
+        check_owned(self.path, self.foreign_entries, remedy)
 
     def discard(self, keep_lock: bool = True) -> None:
         """Removes everything a previous attempt wrote (``resume=false``), the lock file aside

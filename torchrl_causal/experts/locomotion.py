@@ -32,13 +32,9 @@ the ant's shipped weights are regenerated)::
 
 from __future__ import annotations
 
-import argparse
-import json
+import logging
 import math
-import shutil
-import sys
-import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, TypedDict
@@ -46,18 +42,33 @@ from typing import Any, TypedDict
 import torch
 from tensordict.nn import NormalParamExtractor, TensorDictModule
 from torch import nn
-from torchrl.collectors import Collector
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 from torchrl.objectives import SACLoss, SoftUpdate
-from torchrl.record.loggers.csv import CSVLogger
 
+from torchrl_causal.command_line import non_negative, positive_number
 from torchrl_causal.envs.ant import LOCOMOTION_OBSERVATION_DIM, AntLocomotionEnv
 from torchrl_causal.envs.humanoid import HUMANOID_SKILL_OBSERVATION_DIM, HumanoidLocomotionEnv
 from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv
 from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.experiment.run_directory import atomic_save, load_checkpoint
+from torchrl_causal.experts.skill_run import (
+    BEST_BODY,
+    BOOKKEEPING,
+    EXPORT,
+    SkillLoop,
+    SkillRunDirectory,
+    add_output_argument,
+    check_same_config,
+    finish_skill_run,
+    read_skill_state,
+    require_positive,
+    run_skill_command,
+    skill_collector,
+    skill_parser,
+    upright_speed,
+)
 from torchrl_causal.experts.skills import HUMANOID_LOCOMOTION_WEIGHTS, LOCOMOTION_WEIGHTS, CommandFrame, make_skill_network
 
 __all__ = [
@@ -77,8 +88,9 @@ __all__ = [
     "upright_speed",
 ]
 
+log = logging.getLogger(__name__)
+
 _CHECKPOINT = "checkpoint.pt"
-_RESUME_STATE = "resume_state.pt"
 _BUFFER = "buffer"
 _CONFIG = "locomotion_config.json"
 #: what SACLoss reads; the collector's other entries (loc, scale, xy...) stay out of the buffer.
@@ -245,20 +257,6 @@ def evaluate_locomotion(
     }
 
 
-def upright_speed(result: Mapping[str, float]) -> float:
-    """The score that selects a skill run's best evaluation: speed along the command times the
-    fraction of envs that never fell.
-
-    Speed alone prefers a policy that lunges along the command and falls (a fall moves the torso
-    fast) to one that stands or walks slowly without falling; the maze expert needs the latter.
-
-    Examples:
-        >>> upright_speed({"speed": 0.13, "fall_rate": 1.0}), upright_speed({"speed": 0.8, "fall_rate": 0.25})
-        (0.0, 0.6000000000000001)
-    """
-    return result["speed"] * (1.0 - result["fall_rate"])
-
-
 class _Counters(TypedDict):
     """Where training stands, checkpointed with the learner."""
 
@@ -269,83 +267,6 @@ class _Counters(TypedDict):
     collect_seed: int
 
 
-class _Progress:
-    """A tqdm bar on a terminal, else a plain line every ``every`` steps (logs stay readable)."""
-
-    def __init__(self, name: str, total: int, initial: int, every: int = 10_000) -> None:
-        self.name, self.every, self.last = name, every, initial
-        self.bar = None
-        if sys.stderr.isatty():
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=total, initial=initial, unit="step", desc=name)
-        self.total = total
-
-    def update(self, done: int, **scalars: float) -> None:
-        text = " ".join(f"{k}={v:.3g}" for k, v in scalars.items())
-        if self.bar is not None:
-            self.bar.update(done - self.bar.n)
-            self.bar.set_postfix_str(text)
-        elif done - self.last >= self.every or done >= self.total:
-            self.last = done
-            print(f"[{self.name}] {done}/{self.total} steps {text}", flush=True)
-
-
-#: Fields a continued run may change: the budget, and when and how much it evaluates and saves.
-BOOKKEEPING = frozenset({"total_steps", "eval_every", "eval_envs", "eval_steps", "checkpoint_minutes"})
-
-#: Where a skill run keeps the body of its best evaluation, in its run directory.
-BEST_BODY = "best_body.pt"
-
-
-def require_positive(config: Any, names: Iterable[str]) -> None:
-    """Refuses a config whose ``names`` fields are not all >= 1, naming the first that is not."""
-    for name in names:
-        if getattr(config, name) < 1:
-            raise InvalidValueError(f"{name} must be >= 1, got {getattr(config, name)}")
-
-
-def _as_json(value: Any) -> Any:
-    """``value`` as a JSON file reads it back (a tuple is a list there), so saved and live configs compare."""
-    return json.loads(json.dumps(value))
-
-
-def check_same_config(saved: dict[str, Any], config: Any, where: str | Path) -> None:
-    """Refuses to continue a run made with another config (its learning settings, not its
-    :data:`BOOKKEEPING`); ``config`` is a dataclass, and fields added since the run started
-    keep their default."""
-    defaults = asdict(type(config)())
-    changed = sorted(k for k, v in asdict(config).items() if k not in BOOKKEEPING and _as_json(saved.get(k, defaults[k])) != _as_json(v))
-    if changed:
-        raise InvalidValueError(f"{where} was trained with another config (changed: {changed}); use a new --run-dir or the same settings")
-
-
-def finish_skill_run(run_dir: Path, output: str | Path | None, record: dict[str, Any]) -> dict[str, Any]:
-    """Exports the run's best body to ``output`` (unless ``None`` or there is none yet), writes
-    ``record`` (with ``"exported"``) to ``<run_dir>/result.json`` and returns it."""
-    if output is not None and (run_dir / BEST_BODY).exists():
-        output = Path(output)
-        output.parent.mkdir(parents=True, exist_ok=True)
-        atomic_save(torch.load(run_dir / BEST_BODY, weights_only=True), output)
-        record["exported"] = str(output)
-    (run_dir / "result.json").write_text(json.dumps(record, indent=2))
-    return record
-
-
-#: The command lines' default export, in the run directory: only a named ``--output`` replaces
-#: the package's weights (a short trial run must not).
-EXPORT = "export.pt"
-
-
-def add_output_argument(parser: argparse.ArgumentParser) -> None:
-    """The skill command lines' ``--output``: unset, they export to ``<run-dir>/``:data:`EXPORT`."""
-    parser.add_argument(
-        "--output",
-        default=None,
-        help="where the best policy body is exported (default: <run-dir>/export.pt; the package's weights only when named)",
-    )
-
-
 def train_locomotion(
     run_dir: str | Path,
     config: LocomotionConfig = LocomotionConfig(),
@@ -353,6 +274,7 @@ def train_locomotion(
     skill: str | LocomotionSkill = "ant",
     output: str | Path | None = None,
     resume_from: str | Path | None = None,
+    progress_bar: bool = True,
 ) -> dict[str, Any]:
     """Trains (or resumes) a skill's policy in ``run_dir``; exports the best body to ``output``.
 
@@ -362,14 +284,12 @@ def train_locomotion(
     networks, optimisers and counters, the buffer refilled by the current policy; a
     ``run_dir`` that has its own checkpoint ignores it. Returns the final record: steps,
     updates, best evaluation and the export path. A run directory made with another config
-    is refused (the changed fields are named).
+    is refused (the changed fields are named), and so is a folder holding anything the run
+    did not write (:class:`~torchrl_causal.experts.skill_run.SkillRunDirectory`).
     """
     skill = SKILLS[skill] if isinstance(skill, str) else skill
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    config_path = run_dir / _CONFIG
-    if config_path.exists():
-        check_same_config(json.loads(config_path.read_text()), config, run_dir)
+    run = SkillRunDirectory(run_dir, _CONFIG, (_CHECKPOINT, _BUFFER, f"{_BUFFER}.tmp", f"{_BUFFER}.old"))
+    run.open(config)
     torch.manual_seed(config.seed)
 
     actor = make_locomotion_actor(skill.network(config.hidden))
@@ -392,40 +312,32 @@ def train_locomotion(
             optimizer.load_state_dict(state["optimizers"][name])
         counters.update(state["counters"])
 
-    checkpoint = run_dir / _CHECKPOINT
+    checkpoint = run.path / _CHECKPOINT
     if checkpoint.exists():
         state = load_checkpoint(checkpoint)
         load_learner(state)
         torch.set_rng_state(state["torch_rng"])
-        buffer.loads(run_dir / _BUFFER)
-        print(f"[{skill.name}] resumed at {counters['steps']} steps from {checkpoint}", flush=True)
+        buffer.loads(run.path / _BUFFER)
+        log.info("[%s] resumed at %d steps from %s", skill.name, counters["steps"], checkpoint)
     elif resume_from is not None:
-        state = load_checkpoint(Path(resume_from))
-        if state.get("skill") != skill.name:
-            raise InvalidValueError(f"{resume_from} holds a {state.get('skill')!r} skill, not {skill.name!r}")
+        state = read_skill_state(resume_from, skill.name, "sac")
         check_same_config(state["config"], config, resume_from)
         load_learner(state)
-        if "best_body" in state:  # the best policy so far travels with the state
-            atomic_save(state["best_body"], run_dir / BEST_BODY)
-        print(
-            f"[{skill.name}] resumed at {counters['steps']} steps from {resume_from}; the buffer refills "
-            f"from the current policy ({config.random_steps} steps)",
-            flush=True,
+        run.adopt_best(state)
+        log.info(
+            "[%s] resumed at %d steps from %s; the buffer refills from the current policy (%d steps)",
+            skill.name,
+            counters["steps"],
+            resume_from,
+            config.random_steps,
         )
-    config_path.write_text(json.dumps(asdict(config), indent=2))
+    run.write_config(config)
 
     def save() -> None:
-        tmp = run_dir / (_BUFFER + ".tmp")
-        shutil.rmtree(tmp, ignore_errors=True)
-        buffer.dumps(tmp)
-        old = run_dir / (_BUFFER + ".old")
-        shutil.rmtree(old, ignore_errors=True)
-        if (run_dir / _BUFFER).exists():
-            (run_dir / _BUFFER).rename(old)
-        tmp.rename(run_dir / _BUFFER)
-        shutil.rmtree(old, ignore_errors=True)
+        run.replace_folder(_BUFFER, buffer.dumps)
         learner = {
             "progress": counters["steps"],
+            "algorithm": "sac",
             "skill": skill.name,
             "config": asdict(config),
             "loss": loss.state_dict(),
@@ -433,28 +345,25 @@ def train_locomotion(
             "counters": dict(counters),
         }
         atomic_save({**learner, "torch_rng": torch.get_rng_state()}, checkpoint)
-        best = run_dir / BEST_BODY
-        best_body = {"best_body": torch.load(best, weights_only=True)} if best.exists() else {}
-        atomic_save({**learner, **best_body}, run_dir / _RESUME_STATE)
+        run.save_resume_state(learner)
 
-    logger = CSVLogger(exp_name="locomotion", log_dir=str(run_dir / "logs"))
+    def evaluate() -> dict[str, float]:
+        body = actor.module[0].module[0]
+        result = evaluate_locomotion(body, skill=skill, envs=config.eval_envs, steps=config.eval_steps)
+        run.keep_if_best(counters, body, result)
+        return result
+
     remaining = config.total_steps - counters["steps"]
-    progress = _Progress(f"{skill.name} locomotion", config.total_steps, counters["steps"])
     if remaining > 0:
         # A resumed run draws fresh episodes from a new seed (env state is not checkpointed).
         counters["collect_seed"] += 1
         env = skill.make_env(config.num_envs, counters["collect_seed"])
         random_left = max(0, config.random_steps - counters["steps"])
-        collector = Collector(
-            env,
-            actor,
-            frames_per_batch=config.frames_per_batch,
-            total_frames=math.ceil(remaining / config.frames_per_batch) * config.frames_per_batch,
-            init_random_frames=math.ceil(random_left / config.frames_per_batch) * config.frames_per_batch,
-            device="cpu",
-            auto_register_policy_transforms=False,
+        collector = skill_collector(env, actor, config.frames_per_batch, remaining, random_left)
+        shown = ("train_reward", "eval_speed", "eval_fall_rate", "alpha")
+        loop = SkillLoop(
+            run, f"{skill.name} locomotion", "locomotion", config, config.frames_per_batch, counters["steps"], save, shown, progress_bar
         )
-        last_save = time.monotonic()
         for batch in collector:
             buffer.extend(batch.reshape(-1).select(*_TRANSITION_KEYS))
             counters["steps"] += batch.numel()
@@ -476,62 +385,50 @@ def train_locomotion(
                 if losses is not None:
                     metrics.update(loss_qvalue=losses["loss_qvalue"].item(), alpha=losses["alpha"].item(), entropy=losses["entropy"].item())
             collector.update_policy_weights_()
-            steps = counters["steps"]
-            if steps % config.eval_every < config.frames_per_batch or steps >= config.total_steps:
-                body = actor.module[0].module[0]
-                result = evaluate_locomotion(body, skill=skill, envs=config.eval_envs, steps=config.eval_steps)
-                metrics.update({f"eval_{name}": value for name, value in result.items()})
-                score = upright_speed(result)
-                if score > counters["best_score"]:
-                    counters["best_score"] = score
-                    atomic_save(body.state_dict(), run_dir / BEST_BODY)
-                save()
-                last_save = time.monotonic()
-            elif time.monotonic() - last_save > 60 * config.checkpoint_minutes:
-                save()
-                last_save = time.monotonic()
-            for name, value in metrics.items():
-                logger.log_scalar(name, value, step=steps)
-            progress.update(steps, **{k: v for k, v in metrics.items() if k in ("train_reward", "eval_speed", "eval_fall_rate", "alpha")})
-            if steps >= config.total_steps:
+            if loop.after_batch(counters["steps"], batch.numel(), metrics, evaluate):
                 break
         collector.shutdown()
-        save()
+        loop.close()
     record = {"skill": skill.name, "steps": counters["steps"], "updates": counters["updates"], "best_eval_score": counters["best_score"]}
-    return finish_skill_run(run_dir, output, record)
+    return run.finish(output, record)
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--skill", choices=sorted(SKILLS), default="ant")
-    parser.add_argument("--run-dir", default=None, help="checkpoints, buffer and logs (resumed); default runs/<skill>_locomotion")
-    parser.add_argument(
-        "--resume-from", default=None, help="a resume_state.pt to start an empty --run-dir from (the buffer refills from the policy)"
+    parser = skill_parser(
+        __doc__,
+        SKILLS,
+        "ant",
+        run_dir="checkpoints, buffer and logs (resumed); default runs/<skill>_locomotion",
+        resume_from="a resume_state.pt to start an empty --run-dir from (the buffer refills from the policy)",
+        steps="total env steps (skill default: ant 400k, humanoid 3M)",
     )
-    parser.add_argument("--steps", type=int, default=None, help="total env steps (skill default: ant 400k, humanoid 3M)")
-    parser.add_argument("--utd", type=float, default=None, help="gradient steps per env step (ant 1, humanoid 0.5)")
+    parser.add_argument("--utd", type=positive_number, default=None, help="gradient steps per env step (ant 1, humanoid 0.5)")
     parser.add_argument(
-        "--random-steps", type=int, default=None, help="uniformly random steps of a fresh run; the buffer size at which updates start"
+        "--random-steps",
+        type=non_negative,
+        default=None,
+        help="uniformly random steps of a fresh run; the buffer size at which updates start",
     )
-    parser.add_argument("--eval-every", type=int, default=None, help="env steps between evaluations (and checkpoints)")
-    parser.add_argument("--seed", type=int, default=None)
-    add_output_argument(parser)
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (one is fastest on small CPUs)")
     args = parser.parse_args(argv)
-    torch.set_num_threads(args.threads)
     skill = SKILLS[args.skill]
-    config = skill.config(
-        total_steps=args.steps, updates_per_step=args.utd, random_steps=args.random_steps, eval_every=args.eval_every, seed=args.seed
+    run_skill_command(
+        args.threads,
+        Path(args.run_dir or f"runs/{skill.name}_locomotion"),
+        args.output,
+        lambda run_dir, output: train_locomotion(
+            run_dir,
+            skill.config(
+                total_steps=args.steps,
+                updates_per_step=args.utd,
+                random_steps=args.random_steps,
+                eval_every=args.eval_every,
+                seed=args.seed,
+            ),
+            skill=skill,
+            output=output,
+            resume_from=args.resume_from,
+        ),
     )
-    run_dir = Path(args.run_dir or f"runs/{skill.name}_locomotion")
-    record = train_locomotion(
-        run_dir,
-        config,
-        skill=skill,
-        output=args.output or run_dir / EXPORT,
-        resume_from=args.resume_from,
-    )
-    print(json.dumps(record))
 
 
 if __name__ == "__main__":

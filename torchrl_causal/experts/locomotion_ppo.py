@@ -31,7 +31,6 @@ import copy
 import json
 import logging
 import math
-import time
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
@@ -40,28 +39,26 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictSequential
 from torch import nn
-from torchrl.collectors import Collector
 from torchrl.envs import TransformedEnv, UnaryTransform
 from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOperator
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
-from torchrl.record.loggers.csv import CSVLogger
 
+from torchrl_causal.command_line import count, non_negative_number, positive_number
 from torchrl_causal.errors import InvalidTypeError, InvalidValueError
-from torchrl_causal.experiment.run_directory import atomic_save, load_checkpoint
-from torchrl_causal.experts.locomotion import (
-    BEST_BODY,
-    EXPORT,
-    SKILLS,
-    LocomotionSkill,
-    add_output_argument,
+from torchrl_causal.experiment.run_directory import atomic_save
+from torchrl_causal.experts.locomotion import SKILLS, LocomotionSkill, evaluate_locomotion
+from torchrl_causal.experts.skill_run import (
+    SkillLoop,
+    SkillRunDirectory,
     check_same_config,
-    evaluate_locomotion,
-    finish_skill_run,
+    read_skill_state,
     require_positive,
-    upright_speed,
+    run_skill_command,
+    skill_collector,
+    skill_command,
+    skill_parser,
 )
-from torchrl_causal.progress import progress
 
 __all__ = [
     "ADAPTIVE_LR_BOUNDS",
@@ -77,7 +74,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-_RESUME_STATE = "resume_state.pt"
 _CONFIG = "ppo_config.json"
 
 
@@ -354,11 +350,8 @@ def train_locomotion_ppo(
         raise InvalidValueError(f"the {skill.name} skill's env takes no {unknown} (it takes {list(skill.env_options) or 'none'})")
     # Applied to the collector's env, so the learner (and its normaliser) only ever see the turned observations.
     frame = _command_frame(skill, config)
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    config_path = run_dir / _CONFIG
-    if config_path.exists():
-        check_same_config(json.loads(config_path.read_text()), config, run_dir)
+    run = SkillRunDirectory(run_dir, _CONFIG)
+    run.open(config)
     torch.manual_seed(config.seed)
 
     norm, body, actor, value, loss = _make_learner(skill, config)
@@ -373,19 +366,18 @@ def train_locomotion_ppo(
         "command_spread": config.command_spread,
     }
 
-    state_path = run_dir / _RESUME_STATE
-    source = state_path if state_path.exists() else (Path(resume_from) if resume_from is not None else None)
+    source = run.resume_state if run.resume_state.exists() else (Path(resume_from) if resume_from is not None else None)
     if source is not None:
-        state = _load_ppo_state(source, skill)
+        state = read_skill_state(source, skill.name, "ppo")
         check_same_config(state["config"], config, source)
         loss.load_state_dict(state["loss"])
         optimizer.load_state_dict(state["optimizer"])
         counters.update(state["counters"])
-        if "best_body" in state and source != state_path:
-            atomic_save(state["best_body"], run_dir / BEST_BODY)
+        if source != run.resume_state:
+            run.adopt_best(state)
         log.info("[%s ppo] resumed at %d env steps from %s", skill.name, counters["steps"], source)
     elif init_from is not None:
-        parent = _load_ppo_state(Path(init_from), skill)
+        parent = read_skill_state(init_from, skill.name, "ppo")
         parent_scale = parent["config"].get("init_scale", PPOLocomotionConfig.init_scale)
         if parent_scale != config.init_scale:
             # The scale's softplus bias is set by init_scale: another value changes the parent's policy.
@@ -409,22 +401,20 @@ def train_locomotion_ppo(
             init_steps=inherited["steps"],
         )
         log.info("[%s ppo] new run from %s's learner at %d env steps", skill.name, init_from, counters["steps"])
-    config_path.write_text(json.dumps(asdict(config), indent=2))
+    run.write_config(config)
 
     def save() -> None:
-        best = run_dir / BEST_BODY
-        state = {
-            "progress": counters["steps"],
-            "algorithm": "ppo",
-            "skill": skill.name,
-            "config": asdict(config),
-            "loss": loss.state_dict(),
-            "optimizer": optimizer.state_dict(),
-            "counters": dict(counters),
-        }
-        if best.exists():
-            state["best_body"] = torch.load(best, weights_only=True)
-        atomic_save(state, state_path)
+        run.save_resume_state(
+            {
+                "progress": counters["steps"],
+                "algorithm": "ppo",
+                "skill": skill.name,
+                "config": asdict(config),
+                "loss": loss.state_dict(),
+                "optimizer": optimizer.state_dict(),
+                "counters": dict(counters),
+            }
+        )
 
     def env_options() -> dict[str, Any]:
         spread = counters["command_spread"]
@@ -434,14 +424,12 @@ def train_locomotion_ppo(
         folded = _skill_body(norm, body, frame)
         # On the run's own task (a curriculum stage's commands); the final stage's is the skill's.
         result = evaluate_locomotion(folded, skill=skill, envs=config.eval_envs, steps=config.eval_steps, env_options=env_options())
-        score = upright_speed(result)
-        if score > counters["best_score"]:
-            counters["best_score"] = score
-            atomic_save(folded.state_dict(), run_dir / BEST_BODY)
+        score = run.keep_if_best(counters, folded, result)
         spread = counters["command_spread"]
         if config.widen_gate is not None and spread is not None and spread < math.pi and score >= config.widen_gate:
             counters["command_spread"] = min(math.pi, spread + config.widen_step)
             counters["best_score"] = -math.inf  # the wider spread selects its own best
+            env.command_spread = counters["command_spread"]  # a widened curriculum, from the next batch on
             log.info(
                 "[%s ppo] upright speed %.3f >= %.3f: commands widen to %.4f rad",
                 skill.name,
@@ -451,22 +439,20 @@ def train_locomotion_ppo(
             )
         return {**result, **({} if spread is None else {"command_spread": spread})}
 
-    logger = CSVLogger(exp_name="ppo", log_dir=str(run_dir / "logs"))
     remaining = config.total_steps - counters["steps"]
     if remaining > 0:
         # A resumed run draws fresh episodes from a new seed (the simulations are not saved).
         counters["collect_seed"] += 1
         env = skill.make_env(config.num_envs, counters["collect_seed"], **env_options(), **config.collector_options)
-        collector = Collector(
+        collector = skill_collector(
             env if frame is None else TransformedEnv(env, UnaryTransform(["observation"], ["observation"], fn=frame)),
             actor,
-            frames_per_batch=config.frames_per_batch,
-            total_frames=math.ceil(remaining / config.frames_per_batch) * config.frames_per_batch,
-            device="cpu",
-            auto_register_policy_transforms=False,
+            config.frames_per_batch,
+            remaining,
         )
-        bar = progress(config.total_steps, f"{skill.name} ppo", "env steps", enabled=progress_bar, initial=counters["steps"])
-        last_save = time.monotonic()
+        loop = SkillLoop(
+            run, f"{skill.name} ppo", "ppo", config, config.frames_per_batch, counters["steps"], save, progress_bar=progress_bar
+        )
         for batch in collector:
             metrics = {
                 "train_reward": batch["next", "reward"].mean().item(),
@@ -482,29 +468,14 @@ def train_locomotion_ppo(
             counters["steps"] += batch.numel()
             counters["iterations"] += 1
             collector.update_policy_weights_()
-            steps = counters["steps"]
-            if steps % config.eval_every < config.frames_per_batch or steps >= config.total_steps:
-                metrics.update({f"eval_{k}": v for k, v in evaluate().items()})
-                if counters["command_spread"] is not None:
-                    env.command_spread = counters["command_spread"]  # a widened curriculum, from the next batch on
-                save()
-                last_save = time.monotonic()
-            elif time.monotonic() - last_save > 60 * config.checkpoint_minutes:
-                save()
-                last_save = time.monotonic()
-            for name, number in metrics.items():
-                logger.log_scalar(name, number, step=steps)
-            bar.update(batch.numel())
-            bar.set_postfix({k: f"{v:.3g}" for k, v in metrics.items() if k in ("train_reward", "eval_speed", "eval_fall_rate")})
-            if steps >= config.total_steps:
+            if loop.after_batch(counters["steps"], batch.numel(), metrics, evaluate):
                 break
-        bar.close()
         collector.shutdown()
-        save()
+        loop.close()
     record = {"skill": skill.name, "algorithm": "ppo", "steps": counters["steps"], "best_eval_score": counters["best_score"]}
     if "init_from" in counters:
         record.update(init_from=counters["init_from"], init_steps=counters["init_steps"])
-    return finish_skill_run(run_dir, output, record)
+    return run.finish(output, record)
 
 
 def _make_learner(
@@ -553,7 +524,7 @@ def export_learner(state_path: str | Path, output: str | Path, *, skill: str | L
     normaliser folded in, behind the run's command frame.
     """
     skill = SKILLS[skill] if isinstance(skill, str) else skill
-    state = _load_ppo_state(Path(state_path), skill)
+    state = read_skill_state(state_path, skill.name, "ppo")
     names = {field.name for field in fields(PPOLocomotionConfig)}
     config = PPOLocomotionConfig(**{k: v for k, v in state["config"].items() if k in names})
     norm, body, _, _, loss = _make_learner(skill, config)
@@ -563,13 +534,6 @@ def export_learner(state_path: str | Path, output: str | Path, *, skill: str | L
     output.parent.mkdir(parents=True, exist_ok=True)
     atomic_save(_skill_body(norm, body, frame).state_dict(), output)
     return int(state["progress"])
-
-
-def _load_ppo_state(path: Path, skill: LocomotionSkill) -> dict[str, Any]:
-    state = load_checkpoint(path)
-    if state.get("skill") != skill.name or state.get("algorithm") != "ppo":
-        raise InvalidValueError(f"{path} holds a {state.get('algorithm')!r} {state.get('skill')!r} skill, not PPO's {skill.name!r}")
-    return state
 
 
 def _update(
@@ -609,27 +573,40 @@ def _update(
 
 def _angle(text: str) -> float:
     """An angle in radians from the command line; ``pi`` spells the uniform spread exactly (3.1416 exceeds it)."""
-    return math.pi if text.strip().lower() == "pi" else float(text)
+    if text.strip().lower() == "pi":
+        return math.pi
+    try:
+        angle = float(text)
+    except ValueError:
+        angle = math.nan
+    if not math.isfinite(angle):
+        raise argparse.ArgumentTypeError(f"{text} must be a finite angle in radians, or pi")
+    return angle
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--skill", choices=sorted(SKILLS), default="humanoid")
-    parser.add_argument("--run-dir", default=None, help="resume state and logs (resumed); default runs/<skill>_ppo")
-    parser.add_argument("--resume-from", default=None, help="a resume_state.pt to start an empty --run-dir from")
-    parser.add_argument("--steps", type=int, default=None, help="total env steps (default 30M)")
-    parser.add_argument("--num-envs", type=int, default=None)
-    parser.add_argument("--rollout-steps", type=int, default=None, help="steps per env per iteration (default 64)")
-    parser.add_argument("--epochs", type=int, default=None, help="passes over each batch (default 4)")
-    parser.add_argument("--minibatch-size", type=int, default=None, help="default 1024")
-    parser.add_argument("--eval-every", type=int, default=None, help="env steps between evaluations (and resume states)")
-    parser.add_argument("--seed", type=int, default=None)
-    parser.add_argument("--gamma", type=float, default=None, help="discount (default 0.99; higher makes a fall cost more)")
-    parser.add_argument("--entropy-coeff", type=float, default=None, help="PPO's entropy bonus (default 1e-3)")
-    parser.add_argument("--init-scale", type=float, default=None, help="exploration noise at initialisation (default 1.0)")
+    parser = skill_parser(
+        __doc__,
+        SKILLS,
+        "humanoid",
+        run_dir="resume state and logs (resumed); default runs/<skill>_ppo",
+        resume_from="a resume_state.pt to start an empty --run-dir from",
+        steps="total env steps (default 30M)",
+    )
+    parser.add_argument("--num-envs", type=count, default=None)
+    parser.add_argument("--rollout-steps", type=count, default=None, help="steps per env per iteration (default 64)")
+    parser.add_argument("--epochs", type=count, default=None, help="passes over each batch (default 4)")
+    parser.add_argument("--minibatch-size", type=count, default=None, help="default 1024")
+    parser.add_argument("--gamma", type=positive_number, default=None, help="discount (default 0.99; higher makes a fall cost more)")
+    parser.add_argument("--entropy-coeff", type=non_negative_number, default=None, help="PPO's entropy bonus (default 1e-3)")
+    parser.add_argument("--init-scale", type=positive_number, default=None, help="exploration noise at initialisation (default 1.0)")
     parser.add_argument("--anneal-lr", action="store_true", help="decay the learning rate linearly to 0 over --steps")
-    parser.add_argument("--desired-kl", type=float, default=None, help="adapt the learning rate to keep PPO's KL near this (e.g. 0.01)")
-    parser.add_argument("--speed-weight", type=float, default=None, help="the reward's speed weight (humanoid; default: the env's, 1.0)")
+    parser.add_argument(
+        "--desired-kl", type=positive_number, default=None, help="adapt the learning rate to keep PPO's KL near this (e.g. 0.01)"
+    )
+    parser.add_argument(
+        "--speed-weight", type=non_negative_number, default=None, help="the reward's speed weight (humanoid; default: the env's, 1.0)"
+    )
     parser.add_argument(
         "--command-spread",
         type=_angle,
@@ -637,10 +614,13 @@ def main(argv: list[str] | None = None) -> None:
         help="max angle (rad, or 'pi' for uniform commands) between a command and the heading (humanoid; default pi)",
     )
     parser.add_argument(
-        "--widen-gate", type=float, default=None, help="upright speed (m/s) at an evaluation that widens the commands (a curriculum)"
+        "--widen-gate",
+        type=positive_number,
+        default=None,
+        help="upright speed (m/s) at an evaluation that widens the commands (a curriculum)",
     )
-    parser.add_argument("--widen-step", type=float, default=None, help="radians the commands widen by at the gate (default pi/4)")
-    parser.add_argument("--eval-envs", type=int, default=None, help="simulations per evaluation (default 8)")
+    parser.add_argument("--widen-step", type=positive_number, default=None, help="radians the commands widen by at the gate (default pi/4)")
+    parser.add_argument("--eval-envs", type=count, default=None, help="simulations per evaluation (default 8)")
     parser.add_argument(
         "--command-frame",
         type=_angle,
@@ -649,7 +629,7 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument(
         "--direction-period",
-        type=int,
+        type=count,
         nargs=2,
         metavar=("LOW", "HIGH"),
         default=None,
@@ -662,16 +642,13 @@ def main(argv: list[str] | None = None) -> None:
         metavar="STATE",
         help="train nothing: write the skill body of this resume_state.pt's current learner to --output (required)",
     )
-    add_output_argument(parser)
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (one is fastest on small CPUs)")
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
-    torch.set_num_threads(args.threads)
     skill = SKILLS[args.skill]
     if args.export_from is not None:
         if args.output is None:
             parser.error("--export-from needs --output (where the body goes)")
-        steps = export_learner(args.export_from, args.output, skill=skill)
+        with skill_command(args.threads):
+            steps = export_learner(args.export_from, args.output, skill=skill)
         print(json.dumps({"exported": str(args.output), "steps": steps, "from": args.export_from}))
         return
     overrides = {
@@ -695,17 +672,19 @@ def main(argv: list[str] | None = None) -> None:
         "command_frame": args.command_frame,
         "direction_period": None if args.direction_period is None else tuple(args.direction_period),
     }
-    config = replace(PPOLocomotionConfig(), **{k: v for k, v in overrides.items() if v is not None})
-    run_dir = Path(args.run_dir or f"runs/{skill.name}_ppo")
-    record = train_locomotion_ppo(
-        run_dir,
-        config,
-        skill=skill,
-        output=args.output or run_dir / EXPORT,
-        resume_from=args.resume_from,
-        init_from=args.init_from,
+    run_skill_command(
+        args.threads,
+        Path(args.run_dir or f"runs/{skill.name}_ppo"),
+        args.output,
+        lambda run_dir, output: train_locomotion_ppo(
+            run_dir,
+            replace(PPOLocomotionConfig(), **{k: v for k, v in overrides.items() if v is not None}),
+            skill=skill,
+            output=output,
+            resume_from=args.resume_from,
+            init_from=args.init_from,
+        ),
     )
-    print(json.dumps(record))
 
 
 if __name__ == "__main__":

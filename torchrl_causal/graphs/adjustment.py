@@ -36,7 +36,7 @@ from typing import Literal, cast
 
 from .criteria import BackdoorReport, ExactAdjustment, find_adjustment, sequential_pi_backdoor, sequential_pi_backdoor_by_rule
 from .diagram import CausalDiagram
-from .errors import BoundedInfluenceError, GraphError, NotImitableError, WindowConstructionError
+from .errors import BoundedInfluenceError, GraphError, NotImitableError, WindowConstructionError, check_window_size
 from .indexed import UnionFind
 from .template import REWARD, TimeSliceTemplate
 from .window import AdjustmentWindow
@@ -52,12 +52,6 @@ __all__ = [
     "verification_horizons",
     "windowed_adjustment",
 ]
-
-
-def _check_k(k: object) -> int:
-    if isinstance(k, bool) or not isinstance(k, int) or k < 0:
-        raise GraphError(f"window size k must be an int >= 0, got {k!r}")
-    return k
 
 
 def exact_adjustment(template: TimeSliceTemplate, horizon: int) -> ExactAdjustment:
@@ -284,7 +278,7 @@ def check_bounded_influence(template: TimeSliceTemplate, k: int | None = None) -
         False
     """
     if k is not None:
-        _check_k(k)
+        check_window_size(k)
     required, chain, chain_text, horizon = _influence_bound(template)
     return BoundedInfluence(k=k, required_k=required, chain=chain, chain_text=chain_text, horizon=horizon)
 
@@ -313,7 +307,7 @@ def verification_horizons(k: int) -> tuple[int, int, int]:
     horizon; the shorter horizons add the first ``k`` actions, whose sets are clipped.
     Nothing is claimed past ``5k + 7``.
     """
-    k = _check_k(k)
+    k = check_window_size(k)
     return k + 1, 2 * k + 3, 5 * k + 7
 
 
@@ -517,7 +511,7 @@ def windowed_adjustment(
         >>> w.witnesses[0]
         (('X', 0), ('O', 0), ('L', 0), 'Y')
     """
-    k = _check_k(k)
+    k = check_window_size(k)
     if verification not in ("rule", "listed"):
         raise GraphError(f"verification must be 'rule' or 'listed', got {verification!r}")
     if mode == "relaxed":
@@ -584,7 +578,7 @@ def observation_window(template: TimeSliceTemplate, k: int | None = None) -> Adj
         lags = {v: (0,) for v in template.observed if v != template.action}
         lags[template.action] = (1,)
         return AdjustmentWindow(k=1, action=template.action, lags=lags, exact=False, observed=template.observed)
-    k = _check_k(k)
+    k = check_window_size(k)
     return AdjustmentWindow(
         k=k,
         action=template.action,

@@ -17,7 +17,7 @@ from collections.abc import Hashable, Sequence
 
 from torchrl_causal.errors import TorchRLCausalError
 
-__all__ = ["BoundedInfluenceError", "GraphError", "NotImitableError", "WindowConstructionError", "WindowSizeError"]
+__all__ = ["BoundedInfluenceError", "GraphError", "NotImitableError", "WindowConstructionError", "WindowSizeError", "check_window_size"]
 
 
 class GraphError(TorchRLCausalError, ValueError):
@@ -94,3 +94,25 @@ class WindowSizeError(GraphError):
         )
         self.k = k
         self.horizon = horizon
+
+
+def check_window_size(k: object) -> int:
+    """``k`` when it is a window size (an int >= 0; a bool is not one): the one rule every
+    API that takes ``k`` checks where ``k`` enters it (the graph engine, :class:`~torchrl_causal.graphs.AdjustmentWindow`,
+    the window transform and its replay encoder). A config's ``window.k`` is checked by the
+    config schema, and against the horizon (:class:`WindowSizeError`) where an env is known.
+
+    Raises:
+        GraphError: naming ``k``.
+
+    Examples:
+        >>> check_window_size(3)
+        3
+        >>> check_window_size(-1)
+        Traceback (most recent call last):
+        ...
+        torchrl_causal.graphs.errors.GraphError: window size k must be an int >= 0, got -1
+    """
+    if isinstance(k, bool) or not isinstance(k, int) or k < 0:
+        raise GraphError(f"window size k must be an int >= 0, got {k!r}")
+    return k

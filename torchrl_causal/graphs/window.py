@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from torchrl_causal.errors import InvalidValueError
+from torchrl_causal.graphs.errors import check_window_size
 
 Node = Hashable
 
@@ -77,8 +78,7 @@ class AdjustmentWindow:
     lags_beyond_k: tuple[tuple[str, str, str, int], ...] = ()
 
     def __post_init__(self) -> None:
-        if not isinstance(self.k, int) or self.k < 0:
-            raise InvalidValueError(f"window size k must be a non-negative int, got {self.k!r}")
+        check_window_size(self.k)
         for var, var_lags in self.lags.items():
             if list(var_lags) != sorted(set(var_lags)) or any(lag < 0 or lag > self.k for lag in var_lags):
                 raise InvalidValueError(f"lags of {var!r} must be strictly increasing within 0..{self.k}, got {var_lags!r}")

@@ -15,7 +15,7 @@ from torchrl.envs.batched_envs import BatchedEnvBase
 
 from torchrl_causal.compat import reset_mask
 from torchrl_causal.errors import InvalidStateError, InvalidTypeError, InvalidValueError, MissingAttributeError, UnknownKeyError
-from torchrl_causal.graphs.errors import WindowSizeError
+from torchrl_causal.graphs.errors import WindowSizeError, check_window_size
 from torchrl_causal.graphs.template import TimeSliceTemplate
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.transforms._layout import FeatureSlice, LagRing, WindowLayout, spec_bounds
@@ -206,7 +206,7 @@ class CausalWindowTransform(Transform):
             ValueError: ``k`` is not an int >= 0.
         """
         template, horizon = _template_and_horizon(env)
-        if horizon is not None and isinstance(k, int) and not isinstance(k, bool) and k >= horizon:
+        if horizon is not None and check_window_size(k) >= horizon:
             raise WindowSizeError(k, horizon)
         window = imitator_window(template, k, causal=causal, mode=mode, window_matched=window_matched)
         return cls(window, **kwargs)
@@ -673,8 +673,7 @@ def imitator_window(
         >>> sorted(imitator_window(RouteChoiceEnv.slice_template(), 0, causal=False).lags)  # and the previous action
         ['W', 'X', 'Z']
     """
-    if isinstance(k, bool) or not isinstance(k, int) or k < 0:
-        raise InvalidValueError(f"window size k must be a non-negative int, got {k!r}")
+    check_window_size(k)
     from torchrl_causal.graphs import observation_window, windowed_adjustment
 
     if causal:

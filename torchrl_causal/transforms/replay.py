@@ -21,6 +21,7 @@ from torchrl.data.replay_buffers.storages import Storage
 from torchrl.envs import Transform
 
 from torchrl_causal.errors import InvalidStateError, InvalidValueError, UnknownKeyError
+from torchrl_causal.graphs.errors import check_window_size
 
 if TYPE_CHECKING:
     from torchrl_causal.transforms.causal_window import CausalWindowTransform
@@ -91,8 +92,7 @@ class EpisodeHistory(Sequence):
         traj_key: NestedKey | None = None,
         done_key: NestedKey = ("next", "done"),
     ) -> None:
-        if isinstance(k, bool) or not isinstance(k, int) or k < 0:
-            raise InvalidValueError(f"window size k must be a non-negative int, got {k!r}")
+        check_window_size(k)
         super().__init__(length=1, episode_boundary="pad", done_key=unravel_key(done_key), burn_in=k)
         self.init_key = unravel_key(init_key)
         self.traj_key = None if traj_key is None else unravel_key(traj_key)
