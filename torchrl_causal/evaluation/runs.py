@@ -203,9 +203,10 @@ def _complete_runs(root: Path) -> Iterator[RunDirectory]:
 
 #: What a selected-policy checkpoint (``checkpoints/best.pt``) holds: the actor's weights and
 #: where they were selected; no critic, optimiser or replay state. ``train_success`` joined
-#: with best-checkpoint selection by success: checkpoints written before it lack it.
+#: with best-checkpoint selection by success: checkpoints written before it lack it;
+#: ``val_loss`` is BC's when it selects by validation loss (``algo.select_by_val_loss``).
 POLICY_CHECKPOINT_KEYS = frozenset({"progress", "train_return", "policy"})
-POLICY_CHECKPOINT_OPTIONAL_KEYS = frozenset({"train_success"})
+POLICY_CHECKPOINT_OPTIONAL_KEYS = frozenset({"train_success", "val_loss"})
 
 
 def copy_selected_policy(run: RunDirectory, target: RunDirectory) -> list[Path]:

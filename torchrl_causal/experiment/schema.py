@@ -403,6 +403,9 @@ class BCConfig(TrainedAlgoConfig):
     val_fraction: float = unit_interval(open_low=True, open_high=True)
     # null (fp32, what every run made before the key existed holds) or bf16: the updates' matmuls
     precision: Optional[Precision] = None
+    # Keep the epoch of the lowest validation loss instead of the best periodic evaluation
+    # (false: what every run before the key did).
+    select_by_val_loss: bool = False
 
 
 @dataclass

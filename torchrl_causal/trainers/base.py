@@ -45,7 +45,7 @@ from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.progress import progress
 from torchrl_causal.trainers.telemetry import SpeedMeter, log_config
 
-__all__ = ["Score", "Trainer"]
+__all__ = ["Score", "Trainer", "selection_key"]
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +58,24 @@ class Score(Protocol):
 
     @property
     def success_rate(self) -> float: ...
+
+
+def selection_key(success_rate: float, return_mean: float, by_success: bool) -> tuple[float, ...]:
+    """What best-checkpoint selection maximises over the periodic train-regime evaluations.
+
+    By the mean return alone, or with ``by_success`` (``eval.select_by_success``) by the
+    success rate with the return breaking ties. A goal task's mean return can be dominated by
+    costs the policy does not control (RoverMaze's gust penalty): selecting on it then picks
+    a checkpoint by luck. A strictly greater key replaces the kept one, so among equal keys
+    the earliest evaluation stays selected.
+
+    Examples:
+        >>> selection_key(0.9, -50.0, by_success=True) > selection_key(0.8, -5.0, by_success=True)
+        True
+        >>> selection_key(0.9, -50.0, by_success=False) > selection_key(0.8, -5.0, by_success=False)
+        False
+    """
+    return (success_rate, return_mean) if by_success else (return_mean,)
 
 
 def _truncate_scalar_logs(log_dir: Path, progress: int) -> None:
@@ -273,31 +291,35 @@ class Trainer(ABC):
         speed = {} if self.speed is None else self.speed.read()
         self._log({TRAIN_CURVE: result.return_mean, "eval/train_success": result.success_rate, **speed}, self.progress)
         self.last_evaluated = self.progress
-        if self._selection_key(result.success_rate, result.return_mean) > self._selection_key(self.best_success, self.best_return):
-            self.best_return, self.best_success, self.best_progress = result.return_mean, result.success_rate, self.progress
-            with timed("checkpoints"):
-                self.run.save_checkpoint(
-                    {
-                        "progress": self.progress,
-                        "train_return": result.return_mean,
-                        "train_success": result.success_rate,
-                        "policy": self.policy.state_dict(),
-                    },
-                    best=True,
-                    ignored=(self.budget_key,),  # a longer budget keeps the policy it already selected
-                )
+        by_success = bool(self.cfg.eval.get("select_by_success", False))
+        best_so_far = selection_key(self.best_success, self.best_return, by_success)
+        if self.selects_on_evaluation and selection_key(result.success_rate, result.return_mean, by_success) > best_so_far:
+            self.best_return, self.best_success = result.return_mean, result.success_rate
+            self.keep_selected(train_return=result.return_mean, train_success=result.success_rate)
         self.save_checkpoint()
         log.info(
             "[%d %s] train-regime return %.1f, success %.0f%%", self.progress, self.unit, result.return_mean, 100 * result.success_rate
         )
         return result
 
-    def _selection_key(self, success_rate: float, return_mean: float) -> tuple[float, ...]:
-        # A goal task's mean return can be dominated by costs the policy does not control
-        # (RoverMaze's gust penalty): selecting on it then picks a checkpoint by luck.
-        if self.cfg.eval.get("select_by_success", False):
-            return (success_rate, return_mean)
-        return (return_mean,)
+    @property
+    def selects_on_evaluation(self) -> bool:
+        """Whether the periodic evaluations select the kept policy (:func:`selection_key`).
+        A trainer that selects by another rule (BC's validation loss) returns ``False`` and
+        calls :meth:`keep_selected` itself; its evaluations then only draw the curves."""
+        return True
+
+    def keep_selected(self, **scores: float) -> None:
+        """Writes the policy as it is now to ``checkpoints/best.pt``, the selected policy,
+        with the ``scores`` it was selected on (``train_return`` and ``train_success``: NaN
+        where the rule did not evaluate it), and records :attr:`progress` as where."""
+        self.best_progress = self.progress
+        with timed("checkpoints"):
+            self.run.save_checkpoint(
+                {"progress": self.progress, **scores, "policy": self.policy.state_dict()},
+                best=True,
+                ignored=(self.budget_key,),  # a longer budget keeps the policy it already selected
+            )
 
     def _interrupted(self, signal_number: int) -> RunInterrupted:
         self.save_checkpoint()

@@ -6,7 +6,14 @@ validation sets (``val_fraction`` of the episodes, 20% in the paper); an actor w
 Each epoch runs Adam on the Huber loss over shuffled minibatches of ``batch_size`` (2048:
 large batches); training stops after ``patience`` epochs without a better validation loss
 or after ``epochs`` epochs. BC never acts during training; the base class still evaluates it in
-the train regime every ``eval_every`` epochs and keeps the best checkpoint. With
+the train regime every ``eval_every`` epochs and, by default, keeps the best checkpoint of
+those evaluations (by return, or by success with ``eval.select_by_success``). With
+``algo.select_by_val_loss`` the kept policy is instead the epoch of the lowest validation loss,
+the one early stopping measures (the classic early-stopping rule: the paper's BC learns from
+the static dataset alone); the evaluations then only draw the training curve. Early stopping
+itself reads the validation loss whatever the selection: a run selected by success still
+stops ``patience`` epochs after the validation loss last improved (``algo.patience`` at
+``algo.epochs`` or above turns it off). With
 ``algo.precision=bf16`` the training minibatches' forward runs under a bf16 autocast
 (:func:`~torchrl_causal.experiment.device.matmul_precision`); the validation loss that
 early stopping reads stays fp32.
@@ -66,6 +73,10 @@ class BCTrainer(Trainer):
     def policy(self) -> TensorDictModuleBase:
         return self.loss.actor_network
 
+    @property
+    def selects_on_evaluation(self) -> bool:
+        return not self.cfg.algo.get("select_by_val_loss", False)
+
     def setup(self) -> None:
         algo = self.cfg.algo
         demos = load_or_collect_demonstrations(self.cfg)
@@ -109,12 +120,14 @@ class BCTrainer(Trainer):
         self.updates_done += len(losses)
         with timed("evaluation"):
             val = self.validation_loss()
+        self.progress += 1
         if val < self.best_val_loss:
             self.best_val_loss, self.epochs_without_improvement = val, 0
+            if not self.selects_on_evaluation:  # the policy of the lowest validation loss so far
+                self.keep_selected(train_return=math.nan, train_success=math.nan, val_loss=val)
         else:
             self.epochs_without_improvement += 1
             self.stopped = self.epochs_without_improvement >= self.cfg.algo.patience
-        self.progress += 1
         return {"train/loss_bc": torch.stack(losses).mean(), "val/loss_bc": val}
 
     def training_state(self) -> dict[str, Any]:
