@@ -120,6 +120,8 @@ def test_the_estimate_bounds_the_measured_peak_of_a_run(tmp_path: Path) -> None:
     growth = peak - base
     assert growth <= estimate - base <= 4 * growth, measured
     assert encoded <= growth, measured
+
+
 def _count_windows(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     """The ``k`` of every window the package constructs from a config from now on."""
     from torchrl_causal.experiment import builders
