@@ -76,7 +76,8 @@ class HumanoidMazeEnv(MujocoMazeEnv):
     deployment regime (with ``shift="prior"``: C_xy turned towards the tremor's direction by
     ``confounding_strength`` of the angle between them, the tremors' prevailing direction
     turning round when deployed: :class:`~torchrl_causal.envs.base.PriorShift`); the reward
-    is ``1{success} - |U_t| (1 + d_t / 25)`` with ``d_t`` the distance to the goal in metres (fitted to the paper's raw E[Y]: see the module docstring).
+    is ``1{success} - |U_t| (1 + d_t / 25)`` with ``d_t`` the distance to the goal in metres
+    (fitted to the paper's raw E[Y]: see the module docstring).
 
     Tasks: the ant's cells (medium (1, 1) → (6, 6), large (1, 1) → (7, 10): OGBench's
     ``task1``). The start is standing (:func:`~torchrl_causal.envs.humanoid.standing_qpos`)
