@@ -184,6 +184,8 @@ def test_the_needle_turns_by_strength_times_the_angle_to_the_wind() -> None:
         turned = torch.atan2(needle[:, 1], needle[:, 0])
         error = (turned - (heading + strength * delta) + math.pi).remainder(2 * math.pi) - math.pi
         assert error.abs().max() < 1e-4, strength
+        # calm: the needle is the signal, whichever way it points (signed zeros included)
+        assert torch.equal(DivertedCompass(diversion=strength).needle(signal, torch.zeros_like(gust)), signal), strength
 
 
 def test_strength_zero_reads_the_heading_whatever_the_wind() -> None:
@@ -291,3 +293,20 @@ def test_the_sensors_share_one_reading_protocol() -> None:
         w = sensor.read(signal, gust, rotation=0.0, generator=torch.Generator().manual_seed(2))
         expected = torch.tanh(0.9 * signal + 0.05 * torch.randn((1, 2), generator=torch.Generator().manual_seed(2)))
         assert torch.allclose(w, expected, atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("experiment", "job", "shift"),
+    [
+        ("antmaze_shift", ["row=c_sqil", "+recipe=goal_valued_bc_anchored"], "prior"),
+        ("antmaze_strength", ["env=antmaze_large", "env.confounding_strength=0.15", "row=bc"], "prior"),
+        ("antmaze_horizon", ["env=antmaze_large", "env.horizon=1500", "row=c_iq_learn", "+recipe=goal_valued_bc_anchored"], None),
+    ],
+)
+def test_the_ablation_configs_train_at_the_2_core_budget_under_their_shift(experiment: str, job: list[str], shift: str | None) -> None:
+    cfg = compose_config([f"experiment={experiment}", *job])
+    validate_config(cfg)
+    budget = compose_config(["env=antmaze_medium", "scale=cpu_ant"])
+    assert cfg.env.shift == shift and cfg.eval.final_episodes == budget.eval.final_episodes
+    # demonstrations at the run's own horizon, strength and shift
+    assert f"-h{cfg.env.horizon}-cs{cfg.env.confounding_strength}{'-prior' if shift else ''}-n" in cfg.demos.path

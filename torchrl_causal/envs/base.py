@@ -330,8 +330,11 @@ class DivertedCompass:
         direction = GustProcess.direction(gust)
         x, y = signal.unbind(-1)
         dx, dy = direction.unbind(-1)
-        delta = torch.atan2(x * dy - y * dx, x * dx + y * dy)  # 0 where calm: atan2(0, 0) = 0
-        return rotate(signal, self.diversion * delta)
+        delta = torch.atan2(x * dy - y * dx, x * dx + y * dy)
+        # Calm: no turn. (Not atan2's own 0 for a zero vector: with signed zeros, e.g. a
+        # westward signal times a zero direction, atan2(-0.0, -0.0) is -pi.)
+        calm = gust.norm(dim=-1) == 0
+        return rotate(signal, self.diversion * torch.where(calm, torch.zeros_like(delta), delta))
 
     def read(
         self,
