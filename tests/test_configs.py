@@ -402,6 +402,9 @@ def test_the_run_window_comes_from_the_env_class_without_building_an_env(env: st
         ("window_ablation", {"window.k": "0,1,2,5,10,100", "causal": "true"}),
         ("horizon_ablation", {"env.horizon": "500,1000,1500", "env": "antmaze_medium,antmaze_large"}),
         ("strength_ablation", {"env.confounding_strength": "0.15,0.5,0.85,1.0"}),
+        ("antmaze_horizon", {"env.horizon": "500,1500", "env": "antmaze_medium,antmaze_large", "row": "c_bc,bc", "seed": "0"}),
+        ("antmaze_strength", {"env.confounding_strength": "0.15,0.5,0.85", "env": "antmaze_medium,antmaze_large", "row": "c_bc,bc"}),
+        ("antmaze_shift", {"env": "antmaze_medium", "row": "expert,c_bc,bc", "seed": "0"}),
     ],
 )
 def test_experiments_sweep_the_papers_grids(experiment: str, swept: dict[str, str]) -> None:

@@ -65,7 +65,10 @@ class AntMazeEnv(MujocoMazeEnv):
     probability 0.05 at U[2, 5] N in a uniform direction) pushes the torso with its force
     in newtons (the ant weighs 0.91 kg) every step it blows; the compass is
     ``tanh(0.9 (cos yaw, sin yaw) + 0.1 gust direction + N(0, 0.05²))``, rotated by
-    ``confounding_strength * pi`` in the deployment regime; the reward is
+    ``confounding_strength * pi`` in the deployment regime (with ``shift="prior"`` the wind
+    blows around a prevailing direction that turns round when deployed and diverts the
+    compass towards itself by ``confounding_strength`` in both regimes:
+    :class:`~torchrl_causal.envs.base.PriorShift`); the reward is
     ``1{success} - |U_t| (1 + d_t / 25)`` with ``d_t`` the distance to the goal in metres
     (the episode ends at success).
 

@@ -25,6 +25,20 @@ piecewise-constant :class:`GustProcess` that pushes the body and enters the rewa
 :class:`CompassSensor` whose reading mixes the true signal with the gust direction and is
 rotated by ``confounding_strength * pi`` in the deployment regime. Both helpers are plain
 batched torch functions, so envs that simulate in numpy/MuJoCo can call them on tensors.
+
+**Two kinds of deployment shift** (the ``shift`` argument, :data:`SHIFTS`):
+
+* ``"rotation"`` (the default; the authors' public environment code): the gust process is
+  the same in both regimes (5% of 5-step windows, uniform direction), W is
+  :class:`CompassSensor`'s near-faithful heading, and deploying rotates the reading by
+  ``confounding_strength * pi``. Nothing but the reading moves, so a policy that never reads
+  W sees the same episodes in both regimes.
+* ``"prior"`` (the paper's text: "when P(U) shifts"): only the gust's distribution moves
+  between the regimes (:class:`PriorShift`: a prevailing wind that blows in one direction
+  while training and the opposite way when deployed); the dynamics, the reward and W are the
+  same functions of U in both, and W is :class:`DivertedCompass`, whose needle the wind turns
+  towards its own direction by ``confounding_strength`` of the angle between them (the
+  paper's "strength": the compass's diversion by the wind; 0 = a faithful noisy heading).
 """
 
 from __future__ import annotations
@@ -51,19 +65,28 @@ if TYPE_CHECKING:
 
 __all__ = [
     "REGIMES",
+    "SHIFTS",
     "STEP_MASK_KEY",
     "CompassSensor",
     "ConfoundedEnv",
+    "DivertedCompass",
     "GustConfoundedEnv",
     "GustProcess",
     "PartialStepError",
+    "PrevailingGustProcess",
+    "PriorShift",
     "batch_rows",
     "rotate",
+    "validate_shift",
     "validate_strength",
 ]
 
 Regime = Literal["train", "deploy"]
 REGIMES: tuple[str, ...] = ("train", "deploy")
+Shift = Literal["rotation", "prior"]
+#: The deployment shifts of a :class:`GustConfoundedEnv`: ``"rotation"`` turns W's reading,
+#: ``"prior"`` moves P(U) (see the module docstring).
+SHIFTS: tuple[str, ...] = ("rotation", "prior")
 
 #: TorchRL's partial-step entry of a step's input: a batch-shaped bool mask of the envs to
 #: step (the others are skipped). ``EnvBase.step`` passes it on to a batch-locked env's
@@ -140,8 +163,12 @@ class GustProcess:
         uniforms = torch.rand((*shape, 3), generator=generator, device=device, dtype=dtype)
         active, magnitude, angle = uniforms.unbind(-1)
         magnitude = torch.where(active < self.probability, self.low + (self.high - self.low) * magnitude, torch.zeros_like(magnitude))
-        angle = 2 * math.pi * angle
+        angle = self.angle(angle)
         return torch.stack((magnitude * torch.cos(angle), magnitude * torch.sin(angle)), dim=-1)
+
+    def angle(self, uniform: torch.Tensor) -> torch.Tensor:
+        """The direction (radians) a gust blows towards, from a ``U[0, 1)`` draw: uniform here."""
+        return 2 * math.pi * uniform
 
     def advance(self, gust: torch.Tensor, step_count: torch.Tensor, *, generator: torch.Generator | None = None) -> torch.Tensor:
         """The gust at step ``step_count`` given the gust of the previous step.
@@ -164,6 +191,71 @@ class GustProcess:
     def exposure(gust: torch.Tensor) -> torch.Tensor:
         """Gust magnitude, shape ``batch + (1,)`` (what the reward penalises)."""
         return gust.norm(dim=-1, keepdim=True)
+
+
+@dataclass(frozen=True)
+class PrevailingGustProcess(GustProcess):
+    """A :class:`GustProcess` whose gusts blow around a prevailing direction.
+
+    A gust's direction is uniform on the arc ``direction ± spread * pi`` (radians, the
+    direction the wind blows towards: 0 is +x, ``pi / 2`` is +y), so ``spread = 1`` is the
+    uniform direction of :class:`GustProcess`; the period, probability and magnitudes are
+    :class:`GustProcess`'s. It draws the same three uniforms per gust as its base.
+
+    The mean unit direction of its gusts is ``sinc(spread) * (cos direction, sin direction)``
+    with ``sinc(x) = sin(pi x) / (pi x)`` (the mean of ``cos`` over the arc).
+
+    Examples:
+        >>> process = PrevailingGustProcess(probability=1.0, direction=math.pi / 2, spread=0.25)
+        >>> angles = torch.atan2(*process.draw((4096,), generator=torch.Generator().manual_seed(0)).flip(-1).unbind(-1))
+        >>> bool(((angles - math.pi / 2).abs() <= math.pi / 4 + 1e-6).all())
+        True
+    """
+
+    direction: float = 0.0
+    spread: float = 1.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not 0.0 <= self.spread <= 1.0:
+            raise InvalidValueError(f"gust spread must lie in [0, 1], got {self.spread}")
+
+    def angle(self, uniform: torch.Tensor) -> torch.Tensor:
+        return self.direction + 2 * math.pi * self.spread * (uniform - 0.5)
+
+    def mean_direction(self) -> tuple[float, float]:
+        """``E[unit direction | a gust blows]`` as ``(x, y)`` (the closed form above)."""
+        x = math.pi * self.spread
+        length = math.sin(x) / x if x > 0 else 1.0
+        return length * math.cos(self.direction), length * math.sin(self.direction)
+
+
+@dataclass(frozen=True)
+class PriorShift:
+    """The P(U)-shift deployment: the gust process of each regime, nothing else.
+
+    Training blows a prevailing wind towards ``pi / 4`` (+x, +y), deployment the opposite
+    way (``-3 pi / 4``): the same frequency (a gust in 25% of the 5-step windows, five times
+    the rotation regime's 5%, so that the wind diverts W in enough of the demonstrations for
+    a learner that reads W to lean on it), the same magnitudes (U[2, 5] N) and the same
+    spread (±45° around the prevailing direction). Both directions are perpendicular to the
+    Medium mazes' start-to-goal diagonal (+x, -y) and within 12° of perpendicular to
+    AntMaze-Large's, so neither regime's wind carries an agent towards its goal more than the
+    other's. The period stays 5: the time-slice diagram, whose bidirected edges the period
+    sets, is the same under both kinds of shift.
+
+    Examples:
+        >>> shift = PriorShift()
+        >>> round(math.degrees(shift.process("train").direction)), round(math.degrees(shift.process("deploy").direction))
+        (45, -135)
+    """
+
+    train: GustProcess = PrevailingGustProcess(probability=0.25, direction=math.pi / 4, spread=0.25)
+    deploy: GustProcess = PrevailingGustProcess(probability=0.25, direction=-3 * math.pi / 4, spread=0.25)
+
+    def process(self, regime: str) -> GustProcess:
+        """The gust process of ``regime``."""
+        return self.train if _validate_regime(regime) == "train" else self.deploy
 
 
 @dataclass(frozen=True)
@@ -205,6 +297,61 @@ class CompassSensor:
         return rotate(torch.tanh(raw), rotation)
 
 
+@dataclass(frozen=True)
+class DivertedCompass:
+    """The sensor W of the P(U)-shift regime: a needle the wind turns towards its direction.
+
+    ``W = rotate(tanh(signal_weight * rotate(signal, diversion * delta) + noise), rotation)``
+    where ``delta`` in ``(-pi, pi]`` is the angle from ``signal`` to the gust's direction
+    (0 while calm) and ``noise ~ N(0, noise_std**2)`` per component. ``diversion`` is the
+    confounding strength: 0 reads the signal whatever the wind (W independent of U given the
+    signal), 1 reads the wind's direction while it blows. The reading draws the same noise
+    as :class:`CompassSensor`'s; ``rotation`` is 0 in both regimes of the P(U) shift (kept in
+    the signature so that both sensors read alike). Like the compass, it has no causal effect
+    on anything.
+
+    Examples:
+        >>> sensor = DivertedCompass(diversion=0.5, noise_std=0.0)
+        >>> north, gust_east = torch.tensor([[0.0, 1.0]]), torch.tensor([[3.0, 0.0]])
+        >>> sensor.needle(north, gust_east).round(decimals=4).tolist()  # half-way to the wind
+        [[0.7071, 0.7071]]
+        >>> torch.equal(sensor.needle(north, torch.zeros(1, 2)), north)  # calm: the heading
+        True
+    """
+
+    diversion: float = 1.0
+    signal_weight: float = 0.9
+    noise_std: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.diversion <= 1.0:
+            raise InvalidValueError(f"compass diversion must lie in [0, 1], got {self.diversion}")
+
+    def needle(self, signal: torch.Tensor, gust: torch.Tensor) -> torch.Tensor:
+        """``signal`` turned by ``diversion`` of its angle to the gust's direction (noise-free, pre-``tanh``)."""
+        direction = GustProcess.direction(gust)
+        x, y = signal.unbind(-1)
+        dx, dy = direction.unbind(-1)
+        delta = torch.atan2(x * dy - y * dx, x * dx + y * dy)
+        # Calm: no turn. (Not atan2's own 0 for a zero vector: with signed zeros, e.g. a
+        # westward signal times a zero direction, atan2(-0.0, -0.0) is -pi.)
+        calm = gust.norm(dim=-1) == 0
+        return rotate(signal, self.diversion * torch.where(calm, torch.zeros_like(delta), delta))
+
+    def read(
+        self,
+        signal: torch.Tensor,
+        gust: torch.Tensor,
+        *,
+        rotation: float | torch.Tensor,
+        generator: torch.Generator | None = None,
+    ) -> torch.Tensor:
+        """The sensor reading for a batch of ``signal`` (``batch + (2,)``) under ``gust``."""
+        noise = torch.randn(signal.shape, generator=generator, device=signal.device, dtype=signal.dtype)
+        raw = self.signal_weight * self.needle(signal, gust) + self.noise_std * noise
+        return rotate(torch.tanh(raw), rotation)
+
+
 def _copy_state(value: Any, device: torch.device | None = None) -> Any:
     if isinstance(value, Mapping):
         return {key: _copy_state(item, device) for key, item in value.items()}
@@ -223,6 +370,22 @@ def _validate_regime(regime: str) -> str:
     if regime not in REGIMES:
         raise InvalidValueError(f"regime must be one of {REGIMES}, got {regime!r}")
     return regime
+
+
+def validate_shift(shift: str) -> str:
+    """``shift`` when it is one of :data:`SHIFTS`, else an error naming it.
+
+    Examples:
+        >>> validate_shift("prior")
+        'prior'
+        >>> validate_shift("wind")
+        Traceback (most recent call last):
+        ...
+        torchrl_causal.errors.InvalidValueError: shift must be one of ('rotation', 'prior'), got 'wind'
+    """
+    if shift not in SHIFTS:
+        raise InvalidValueError(f"shift must be one of {SHIFTS}, got {shift!r}")
+    return shift
 
 
 def validate_strength(confounding_strength: float) -> float:
@@ -607,22 +770,64 @@ class GustConfoundedEnv(ConfoundedEnv):
     ``scm_observation()`` to their ``_observation()`` and use :meth:`gust_penalty` in
     their reward.
 
+    Args:
+        shift: ``"rotation"`` (default: the gust process and :attr:`compass` in both regimes,
+            the reading rotated when deployed) or ``"prior"`` (:attr:`prior_shift`'s gust
+            process of the regime, a :class:`DivertedCompass` diverted by
+            ``confounding_strength``, no rotation); see the module docstring.
+        **kwargs: :class:`ConfoundedEnv`'s.
+
     Class attributes:
-        gust_process: the :class:`GustProcess` (period 5, p = 0.05, magnitude U[2, 5]).
-        compass: the :class:`CompassSensor` (0.9 signal + 0.1 gust direction + N(0, 0.05²)).
+        gust_process: the :class:`GustProcess` of the rotation shift (period 5, p = 0.05,
+            magnitude U[2, 5]); its period is the diagram's under either shift.
+        compass: the :class:`CompassSensor` of the rotation shift (0.9 signal + 0.1 gust
+            direction + N(0, 0.05²)).
+        prior_shift: the :class:`PriorShift` (each regime's gust process) of the prior shift.
         metres_per_unit: metres per world unit of the env's positions, so that the
             distance term of :meth:`maze_reward` reads at the MuJoCo mazes' scale.
     """
 
     gust_process: GustProcess = GustProcess()
     compass: CompassSensor = CompassSensor()
+    prior_shift: PriorShift = PriorShift()
     metres_per_unit: float = 1.0
     runtime_attributes = (*ConfoundedEnv.runtime_attributes, "gust")
 
+    def __init__(self, *, shift: Shift = "rotation", **kwargs: Any) -> None:
+        self._shift = validate_shift(shift)
+        super().__init__(**kwargs)
+
+    @property
+    def shift(self) -> str:
+        """``"rotation"`` or ``"prior"``: what deploying changes (see the module docstring)."""
+        return self._shift
+
+    @property
+    def gusts(self) -> GustProcess:
+        """The gust process this env draws U from: :attr:`gust_process` under the rotation
+        shift, the regime's process of :attr:`prior_shift` under the prior shift."""
+        return self.prior_shift.process(self.regime) if self.shift == "prior" else self.gust_process
+
+    @property
+    def sensor(self) -> CompassSensor | DivertedCompass:
+        """The sensor W reads through: :attr:`compass` under the rotation shift, a
+        :class:`DivertedCompass` diverted by ``confounding_strength`` under the prior shift
+        (the same sensor in both regimes)."""
+        if self.shift == "prior":
+            return DivertedCompass(diversion=self.confounding_strength)
+        return self.compass
+
     @property
     def compass_rotation(self) -> float:
-        """Angle by which the sensor reading is rotated: ``strength * pi`` when deployed, else 0."""
-        return self.confounding_strength * math.pi if self.regime == "deploy" else 0.0
+        """Angle by which the sensor reading is rotated: ``strength * pi`` when deployed under
+        the rotation shift, else 0 (always 0 under the prior shift)."""
+        return self.confounding_strength * math.pi if self.regime == "deploy" and self.shift == "rotation" else 0.0
+
+    def config(self) -> dict[str, object]:
+        """:meth:`ConfoundedEnv.config`, plus ``"shift"`` when it is not the default rotation
+        (so that records of rotation envs read as they did before the option existed)."""
+        config = super().config()
+        return config if self.shift == "rotation" else {**config, "shift": self.shift}
 
     def _make_specs(self) -> None:
         self.gust = torch.zeros((*self.batch_size, 2), device=self.device)
@@ -634,15 +839,15 @@ class GustConfoundedEnv(ConfoundedEnv):
         return success.clone()
 
     def _reset_exogenous(self, mask: torch.Tensor) -> None:
-        fresh = self.gust_process.draw(self.batch_size, generator=self.rng, device=self.device)
+        fresh = self.gusts.draw(self.batch_size, generator=self.rng, device=self.device)
         self.gust = torch.where(mask, fresh, self.gust)
 
     def _advance_exogenous(self) -> None:
-        self.gust = self.gust_process.advance(self.gust, self._step_count, generator=self.rng)
+        self.gust = self.gusts.advance(self.gust, self._step_count, generator=self.rng)
 
     def read_compass(self, signal: torch.Tensor) -> torch.Tensor:
-        """W for the true unit ``signal`` under the current gust and regime."""
-        return self.compass.read(signal, self.gust, rotation=self.compass_rotation, generator=self.rng)
+        """W for the true ``signal`` under the current gust, regime and shift."""
+        return self.sensor.read(signal, self.gust, rotation=self.compass_rotation, generator=self.rng)
 
     def maze_reward(self, success: torch.Tensor, distance: torch.Tensor) -> torch.Tensor:
         """The maze suite's per-step reward ``1{success} - |U_t| (1 + d_t / 25)``, ``batch + (1,)``.
@@ -651,7 +856,8 @@ class GustConfoundedEnv(ConfoundedEnv):
         (world units, converted to metres by :attr:`metres_per_unit`) at the step's end.
         Summed over an episode this is the paper's raw E[Y]: about -370 for a 1000-step
         failure (the gust blows 5% of the time at 3.5 on average), near -100 for an
-        expert that succeeds in ~300 steps.
+        expert that succeeds in ~300 steps. The same function of U under either shift: the
+        prior shift's gusts blow 25% of the time, so its returns are about 5 times lower.
 
         Examples:
             >>> from torchrl_causal.envs import RoverMazeEnv  # 4 m per cell
@@ -661,7 +867,7 @@ class GustConfoundedEnv(ConfoundedEnv):
             [[-10.0], [1.0]]
         """
         metres = distance * self.metres_per_unit
-        return success.to(self.gust.dtype) - self.gust_process.exposure(self.gust) * (1.0 + metres / 25.0)
+        return success.to(self.gust.dtype) - GustProcess.exposure(self.gust) * (1.0 + metres / 25.0)
 
     def scm_observation(self) -> dict[str, dict[str, torch.Tensor]]:
         """The ``("scm", "U")`` entry (diagnostics only: no agent may read it)."""

@@ -64,13 +64,20 @@ class HumanoidMazeEnv(MujocoMazeEnv):
     (2), ``"action"`` = X, the 21 torques in ``[-1, 1]``. The imitator's V^O is 68 state dims
     plus the previous action: 89.
 
+    This is the paper's 89-dimensional split: ``J`` includes the root's (free joint's) six
+    velocities, which carry much of the hidden ``C``. The authors' later variant of the
+    environment hides the root's velocities from the imitator as well; ours follows the paper.
+
     Mechanism: the tremor U (``("scm", "U")``, the maze suite's gust process) pushes the
     torso with its force in newtons (the humanoid weighs 40.8 kg, so tremors disturb it far
     less than the wind disturbs the 0.91 kg ant, as the paper reports); the vibration
     reading is ``tanh(0.9 C_xy + 0.1 tremor direction + N(0, 0.05²))`` (C_xy the ground-plane
     centre-of-mass velocity in m/s), rotated by ``confounding_strength * pi`` in the
-    deployment regime; the reward is ``1{success} - |U_t| (1 + d_t / 25)`` with ``d_t`` the
-    distance to the goal in metres (fitted to the paper's raw E[Y]: see the module docstring).
+    deployment regime (with ``shift="prior"``: C_xy turned towards the tremor's direction by
+    ``confounding_strength`` of the angle between them, the tremors' prevailing direction
+    turning round when deployed: :class:`~torchrl_causal.envs.base.PriorShift`); the reward
+    is ``1{success} - |U_t| (1 + d_t / 25)`` with ``d_t`` the distance to the goal in metres
+    (fitted to the paper's raw E[Y]: see the module docstring).
 
     Tasks: the ant's cells (medium (1, 1) → (6, 6), large (1, 1) → (7, 10): OGBench's
     ``task1``). The start is standing (:func:`~torchrl_causal.envs.humanoid.standing_qpos`)

@@ -31,7 +31,7 @@ from tensordict.utils import NestedKey
 from torchrl.data import Bounded, TensorSpec, Unbounded
 
 from torchrl_causal.available import available_memory
-from torchrl_causal.envs.base import EnvArgumentError, GustConfoundedEnv, Regime, batch_rows, validate_batch_size
+from torchrl_causal.envs.base import EnvArgumentError, GustConfoundedEnv, Regime, Shift, batch_rows, validate_batch_size, validate_shift
 from torchrl_causal.envs.maze_layout import MAZE_MAPS, MazeLayout
 from torchrl_causal.errors import InvalidValueError, RenderingUnavailable
 
@@ -345,6 +345,8 @@ class MujocoMazeEnv(GustConfoundedEnv):
         batch_size: the env's batch shape; one MuJoCo simulation per element.
         regime / confounding_strength / horizon / device / seed: see
             :class:`~torchrl_causal.envs.base.ConfoundedEnv`.
+        shift: ``"rotation"`` (default) or ``"prior"``: see
+            :class:`~torchrl_causal.envs.base.GustConfoundedEnv`.
         success_radius: goal tolerance in metres.
     """
 
@@ -379,8 +381,10 @@ class MujocoMazeEnv(GustConfoundedEnv):
         horizon: int | None = None,
         device: torch.device | str | None = None,
         seed: int | None = None,
+        shift: Shift = "rotation",
         success_radius: float | None = None,
     ) -> None:
+        validate_shift(shift)  # before the simulator is built
         if maze not in self.tasks:
             raise InvalidValueError(f"maze must be one of {tuple(self.tasks)}, got {maze!r}")
         self.maze = maze
@@ -414,6 +418,7 @@ class MujocoMazeEnv(GustConfoundedEnv):
             horizon=self.default_horizon if horizon is None else horizon,
             device=device,
             seed=seed,
+            shift=shift,
         )
 
     # -- agent hooks ---------------------------------------------------------------------

@@ -9,7 +9,10 @@ The rover mirrors the Confounded AntMaze mechanism at a fraction of the cost (no
   each blocked axis (the rover slides along walls and never crosses one);
 * the maze suite's gust process (:class:`~torchrl_causal.envs.GustProcess`) pushes the
   rover, costs reward, and contaminates the compass W (0.9 heading + 0.1 gust direction +
-  noise, tanh-bounded, rotated by ``confounding_strength * pi`` when deployed);
+  noise, tanh-bounded, rotated by ``confounding_strength * pi`` when deployed; with
+  ``shift="prior"`` the gusts blow around a prevailing direction that turns round when
+  deployed, and the compass is diverted towards the wind by ``confounding_strength``:
+  :class:`~torchrl_causal.envs.base.PriorShift`);
 * the reward is the maze suite's ``1{success} - |U_t| (1 + d_t / 25)`` per step, with the
   distance ``d_t`` to the goal counted at 4 m per cell (the AntMaze scale), so raw returns
   read as the paper's; coming within 0.5 cells of the goal centre ends the episode (success).
@@ -228,6 +231,8 @@ class RoverMazeEnv(GustConfoundedEnv):
             :data:`ROVER_TASKS` for the start and goal cells).
         batch_size, regime, confounding_strength, horizon, device, seed: see
             :class:`~torchrl_causal.envs.ConfoundedEnv` (``horizon`` defaults to 1000).
+        shift: ``"rotation"`` (default) or ``"prior"``: see
+            :class:`~torchrl_causal.envs.GustConfoundedEnv`.
         params: the rover's :class:`RoverParameters`.
 
     Examples:

@@ -57,15 +57,25 @@ def eval_path(run_dir: str | Path, regime: str) -> Path:
 
 
 class Setting(NamedTuple):
-    """What a table compares algorithms under: task, horizon, strength, window size."""
+    """What a table compares algorithms under: task, horizon, strength, window size, and the
+    deployment shift (``env.shift``: runs of the P(U) shift never pool with the rotation's).
+
+    Examples:
+        >>> Setting("antmaze_medium", 1000, 1.0, 10).describe()
+        'antmaze_medium (H=1000, confounding strength=1, k=10)'
+        >>> Setting("antmaze_medium", 1000, 1.0, 10, "prior").describe()
+        'antmaze_medium (H=1000, confounding strength=1, k=10, shift=prior)'
+    """
 
     env: str
     horizon: int
     strength: float
     k: int
+    shift: str = "rotation"
 
     def describe(self) -> str:
-        return f"{self.env} (H={self.horizon}, confounding strength={self.strength:g}, k={self.k})"
+        shift = "" if self.shift == "rotation" else f", shift={self.shift}"
+        return f"{self.env} (H={self.horizon}, confounding strength={self.strength:g}, k={self.k}{shift})"
 
 
 @dataclass(frozen=True)
@@ -131,7 +141,13 @@ def load_run(run_dir: str | Path) -> RunRecord:
             bool(OmegaConf.select(cfg, "window.window_matched")),
             OmegaConf.select(cfg, "window.drop", default=[]),
         ),
-        setting=Setting(str(cfg.env.name), int(cfg.env.horizon), float(cfg.env.confounding_strength), int(cfg.window.k)),
+        setting=Setting(
+            str(cfg.env.name),
+            int(cfg.env.horizon),
+            float(cfg.env.confounding_strength),
+            int(cfg.window.k),
+            str(OmegaConf.select(cfg, "env.shift") or "rotation"),  # runs made before the option: the rotation
+        ),
         seed=int(cfg.seed),
         evaluations=evaluations,
         curve=read_scalar_csv(curve_file) if curve_file.is_file() else (),

@@ -61,7 +61,9 @@ def instantiate_with_strings(node: DictConfig) -> Any:
 
 
 def make_env(cfg: DictConfig, regime: str, batch_size: int, seed: int) -> EnvBase:
-    """The raw confounded env of ``cfg.env`` (every key, latent ones included)."""
+    """The raw confounded env of ``cfg.env`` (every key, latent ones included); ``env.shift``
+    is passed on only when it is set, so that envs without that argument build as before."""
+    shift = OmegaConf.select(cfg, "env.shift")
     return instantiate(
         cfg.env.make,
         regime=regime,
@@ -69,6 +71,7 @@ def make_env(cfg: DictConfig, regime: str, batch_size: int, seed: int) -> EnvBas
         horizon=cfg.env.horizon,
         confounding_strength=cfg.env.confounding_strength,
         seed=seed,
+        **({} if shift is None else {"shift": str(shift)}),
     )
 
 

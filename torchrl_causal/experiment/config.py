@@ -88,18 +88,31 @@ def gpus_for(device: str) -> int | None:
     return 1 if str(device).split(":")[0] == "cuda" else None
 
 
+def shift_tag(shift: str | None) -> str:
+    """``${shift_tag:${env.shift}}``: what run and demonstration paths add for a deployment
+    shift other than the default rotation, so that its runs and demonstrations (collected in
+    another training regime) never share a folder with the rotation's.
+
+    Examples:
+        >>> shift_tag(None), shift_tag("rotation"), shift_tag("prior")
+        ('', '', '-prior')
+    """
+    return "" if shift in (None, "rotation") else f"-{shift}"
+
+
 _RESOLVERS: dict[str, Callable[..., Any]] = {
     "run_label": run_label,
     "stable_id": stable_id,
     "product": product,
     "rows": rows,
     "gpus_for": gpus_for,
+    "shift_tag": shift_tag,
 }
 
 
 def register_resolvers() -> None:
     """Registers ``${run_label:algo,causal,window_matched,drop}``, ``${stable_id:...}``,
-    ``${product:...}``, ``${rows:...}``, ``${gpus_for:...}`` and the schemas (idempotent)."""
+    ``${product:...}``, ``${rows:...}``, ``${gpus_for:...}``, ``${shift_tag:...}`` and the schemas (idempotent)."""
     for name, resolver in _RESOLVERS.items():
         if not OmegaConf.has_resolver(name):
             OmegaConf.register_new_resolver(name, resolver)

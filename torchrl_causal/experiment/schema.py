@@ -284,12 +284,20 @@ class PaperFamilyConfig:
 @dataclass
 class EnvConfig:
     """A confounded env: ``make`` is instantiated with ``regime``, ``batch_size``,
-    ``horizon``, ``confounding_strength`` and ``seed``; ``expert`` with the env."""
+    ``horizon``, ``confounding_strength`` and ``seed`` (and ``shift`` when it is set);
+    ``expert`` with the env.
+
+    ``shift`` is what deploying changes in a gust-confounded maze: null (the default, what
+    every run made before the option did) or ``rotation`` turn the compass's reading by
+    ``confounding_strength * pi``; ``prior`` moves the wind's distribution P(U) instead
+    (:class:`~torchrl_causal.envs.base.PriorShift`). A string checked by
+    :func:`validate_config`, so that a bad value is refused in one line naming it."""
 
     name: str = MISSING
     horizon: int = at_least()
     confounding_strength: float = unit_interval()
     position_key: Optional[str] = None
+    shift: Optional[str] = None
     make: Any = MISSING
     expert: Any = MISSING  # null: none yet (training refuses the env)
     paper: PaperFamilyConfig = MISSING
@@ -623,6 +631,25 @@ def _check_expert(cfg: DictConfig) -> None:
         )
 
 
+def _check_shift(cfg: DictConfig) -> None:
+    """``env.shift`` is null or one of the shifts, and the env's class takes it."""
+    shift = OmegaConf.select(cfg, "env.shift")
+    if shift is None:
+        return
+    from hydra.utils import get_class
+
+    from torchrl_causal.envs.base import SHIFTS
+
+    if shift not in SHIFTS:
+        raise ConfigValueError(f"config value env.shift={shift!r} is not a shift: it must be null (the rotation), {' or '.join(SHIFTS)}")
+    target = str(cfg.env.make._target_)
+    if not hasattr(get_class(target), "prior_shift"):
+        raise ConfigValueError(
+            f"config value env.shift={shift!r} is for the gust-confounded mazes: env {cfg.env.name!r} ({target}) has one "
+            "deployment shift of its own; leave env.shift null"
+        )
+
+
 def _check_device(cfg: DictConfig) -> None:
     try:
         device = resolve_device(cfg.device)
@@ -747,4 +774,5 @@ def validate_config(cfg: DictConfig) -> None:
     _check_algorithm(cfg)
     _check_target_entropy(cfg)
     _check_expert(cfg)
+    _check_shift(cfg)
     _check_extras(cfg)
