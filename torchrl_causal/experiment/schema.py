@@ -222,6 +222,15 @@ class WarmStartConfig:
     critic_updates: int = at_least(0)
 
 
+@dataclass
+class GAILWarmStartConfig:
+    """``algo.warm_start`` of GAIL: behaviour-clone the actor, then hold it while the critic
+    (and the discriminator) learn its rounds, before PPO moves it. Not in the paper."""
+
+    bc_updates: int = at_least(0)
+    critic_rounds: int = at_least(0)
+
+
 class IQLearnVariant(str, enum.Enum):
     """``IQLearnLoss(variant=...)``: the paper's Algorithm 3, or Garg et al.'s online objective.
 
@@ -433,6 +442,7 @@ class GAILConfig(TrainedAlgoConfig):
     discriminator_batch_size: int = at_least()
     episodes_per_round: int = at_least()
     rounds: int = at_least()
+    warm_start: Optional[GAILWarmStartConfig] = None  # null: the paper's random initial actor
 
 
 @dataclass

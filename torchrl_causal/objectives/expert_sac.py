@@ -24,7 +24,7 @@ from torchrl.objectives.sac import compute_rsample_log_prob
 from torchrl_causal.compat import SACLossWithHooks, entropy_coefficient, priority_weights, qvalues_per_critic, reduce_loss
 from torchrl_causal.errors import InvalidValueError, UnknownKeyError
 from torchrl_causal.objectives.absorbing import ABSORBING_KEY, AbsorbingIndicator
-from torchrl_causal.objectives.utils import eval_mode
+from torchrl_causal.objectives.utils import eval_mode, gaussian_nll, interior_actions
 
 __all__ = ["ALPHA_CLAMP", "BC_SCALES", "GOAL_VALUES", "ExpertFlaggedSACLoss"]
 
@@ -39,10 +39,6 @@ GOAL_VALUES: tuple[str | None, ...] = (None, "expert")
 #: (``|loss_actor|``, about the batch's mean ``Q``, TD3+BC's normaliser) or
 #: ``"expert_value"`` (the critic's scale ``r_E / (1 - gamma)``, a constant).
 BC_SCALES: tuple[str, ...] = ("actor_loss", "expert_value")
-
-#: Expert actions are clipped this far inside the action bounds before their
-#: log-likelihood is taken: a tanh-Gaussian gives the bounds themselves density zero.
-_BC_ACTION_MARGIN = 1e-3
 
 #: Where :meth:`ExpertFlaggedSACLoss.actor_loss` leaves its pass's deterministic action for
 #: the anchor in :meth:`~ExpertFlaggedSACLoss.forward` (SACLoss's forward keeps only the
@@ -216,10 +212,8 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
         """The batch's actions clipped inside the bounds, and the expert rows' weights (sum 1)."""
         expert = self.expert_flag(tensordict).to(self.log_alpha.dtype)
         weights = expert / expert.sum().clamp_min(1.0)
-        spec = self.actor_network.spec[self.tensor_keys.action]
-        low, high = spec.space.low.to(weights.device), spec.space.high.to(weights.device)
-        margin = _BC_ACTION_MARGIN * (high - low)
-        actions = tensordict.get(self.tensor_keys.action).clamp(low + margin, high - margin)
+        # Clipped inside the bounds: a tanh-Gaussian gives the bounds themselves density zero.
+        actions = interior_actions(self.actor_network.spec[self.tensor_keys.action], tensordict.get(self.tensor_keys.action))
         return actions, weights
 
     def behaviour_cloning_nll(self, tensordict: TensorDictBase) -> torch.Tensor:
@@ -227,9 +221,7 @@ class ExpertFlaggedSACLoss(SACLossWithHooks):
         likelihood behaviour cloning: fits the mean and the spread); used to warm-start it."""
         actions, weights = self.expert_actions(tensordict)
         with self.actor_network_params.to_module(self.actor_network, preserve_module_state=False):
-            dist = self.actor_network.get_dist(tensordict.select(*self.actor_network.in_keys, strict=False))
-            log_prob = dist.log_prob(actions)
-        return -(weights.squeeze(-1) * log_prob.reshape(weights.shape[:-1])).sum()
+            return gaussian_nll(self.actor_network, tensordict, actions, weights)
 
     def anchor_error(self, deterministic_action: torch.Tensor, tensordict: TensorDictBase) -> torch.Tensor:
         """Mean squared error between ``deterministic_action`` (the actor's, one row per row of

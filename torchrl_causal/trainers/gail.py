@@ -14,6 +14,13 @@ gradient-norm clipping. With ``algo.loss.absorbing`` expert and policy transitio
 absorbing states for the discriminator, and terminal steps the absorbing state's
 discounted reward.
 
+``algo.warm_start`` (off in the paper's configs; ``+recipe=gail_bc_start``) starts the actor
+from maximum-likelihood behaviour cloning on the expert transitions
+(:meth:`~GAILTrainer.clone_expert_actions`, ``bc_updates`` steps of ``algo.batch_size``
+rows) before the first rollout, then holds it for ``critic_rounds`` rounds in which the
+discriminator and the value network learn its rollouts: PPO's first actor updates then
+read advantages from a critic fitted to this actor, not from a random one.
+
 The actor has no dropout (``algo.actor.dropout`` must be 0, which
 :func:`~torchrl_causal.experiment.schema.validate_config` enforces): PPO's ratio divides the
 loss's probability of an action by the one recorded when it was taken, and a mask
@@ -30,14 +37,18 @@ from typing import Any
 
 import torch
 from hydra.utils import instantiate
+from omegaconf import DictConfig
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
+from torchrl_causal.errors import InvalidStateError
 from torchrl_causal.experiment.builders import TRANSITION_KEYS, instantiate_with_strings, make_imitator_env, make_policy, observation_dim
 from torchrl_causal.experiment.device import CPU
 from torchrl_causal.objectives import ABSORBING_KEY, add_absorbing_transitions, gail_discriminator_batch
+from torchrl_causal.objectives.utils import gaussian_nll, interior_actions
 from torchrl_causal.trainers.base import Trainer
 from torchrl_causal.trainers.collection import ResumableCollector
+from torchrl_causal.trainers.warm_start import behaviour_clone
 
 __all__ = ["GAILTrainer"]
 
@@ -91,6 +102,40 @@ class GAILTrainer(Trainer):
     def policy_optimizers(self) -> tuple[torch.optim.Optimizer, ...]:
         return self.actor_optimizer, self.critic_optimizer
 
+    @property
+    def warm_start(self) -> DictConfig | None:
+        """``algo.warm_start`` (``bc_updates``, ``critic_rounds``), or ``None`` (the paper's random actor)."""
+        return self.cfg.algo.get("warm_start")
+
+    @property
+    def actor_held(self) -> bool:
+        """Whether this round is one of the warm start's critic rounds, in which PPO leaves the actor as it is."""
+        return self.warm_start is not None and self.progress < self.warm_start.critic_rounds
+
+    def expert_nll(self, rows: TensorDictBase) -> torch.Tensor:
+        """Mean negative log-likelihood of expert ``rows``' actions under the actor's
+        distribution (PPO's loss parameters, so the gradient reaches what PPO trains)."""
+        ppo = self.losses.policy
+        actions = interior_actions(ppo.actor_network.spec["action"], rows.get("action"))
+        weights = torch.full((rows.numel(), 1), 1.0 / rows.numel(), device=actions.device)
+        with ppo.actor_network_params.to_module(ppo.actor_network, preserve_module_state=False):
+            return gaussian_nll(ppo.actor_network, rows, actions, weights)
+
+    def clone_expert_actions(self) -> None:
+        """Warm start, part 1: ``warm_start.bc_updates`` steps of maximum-likelihood behaviour
+        cloning of the actor (mean and spread) on ``algo.batch_size`` expert rows drawn at
+        random, with an Adam of its own (``algo.actor_optimizer``'s settings)."""
+        if self.warm_start is None:
+            raise InvalidStateError(f"{type(self).__name__}: a warm start needs algo.warm_start (bc_updates, critic_rounds)")
+        params = list(self.losses.policy.actor_network_params.flatten_keys().values())
+        optimizer = instantiate(self.cfg.algo.actor_optimizer)(params)
+        behaviour_clone(
+            lambda: self.expert_nll(self._sample(self.expert, self.cfg.algo.batch_size)),
+            optimizer,
+            self.warm_start.bc_updates,
+            self.cfg.algo.max_grad_norm,
+        )
+
     def _sample(self, data: TensorDictBase, size: int) -> TensorDictBase:
         return data[torch.randint(data.numel(), (min(size, data.numel()),), generator=self.generator)]
 
@@ -119,17 +164,22 @@ class GAILTrainer(Trainer):
     def _update_policy(self, rollout: TensorDictBase) -> dict[str, torch.Tensor]:
         algo = self.cfg.algo
         ppo = self.losses.policy
-        params = [p for optimizer in self.policy_optimizers for group in optimizer.param_groups for p in group["params"]]
         sums: dict[str, torch.Tensor] = {}
         count = 0
+        # A warm start's critic rounds step the critic alone, on its own loss.
+        optimizers = (self.critic_optimizer,) if self.actor_held else self.policy_optimizers
+        params = [p for optimizer in optimizers for group in optimizer.param_groups for p in group["params"]]
         for minibatch in self._minibatches(rollout, algo.batch_size, algo.ppo_epochs):
             out = ppo(minibatch)
-            loss = out["loss_objective"] + out["loss_critic"] + out["loss_entropy"]
-            for optimizer in self.policy_optimizers:
+            if self.actor_held:
+                loss = out["loss_critic"]
+            else:
+                loss = out["loss_objective"] + out["loss_critic"] + out["loss_entropy"]
+            for optimizer in optimizers:
                 optimizer.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(params, algo.max_grad_norm)
-            for optimizer in self.policy_optimizers:
+            for optimizer in optimizers:
                 optimizer.step()
             for key in ("loss_objective", "loss_critic", "loss_entropy", "clip_fraction"):
                 sums[key] = sums.get(key, 0.0) + out[key].detach()
@@ -138,6 +188,9 @@ class GAILTrainer(Trainer):
         return {f"train/{k}": v / count for k, v in sums.items()}
 
     def train_step(self) -> Mapping[str, torch.Tensor]:
+        # A fresh run's warm start (progress says whether it ran: a resumed run never repeats it).
+        if self.warm_start is not None and self.progress == 0 and self.warm_start.bc_updates:
+            self.clone_expert_actions()
         rollout = next(self.rollouts)  # [episodes_per_round, horizon], time last
         self.env_steps_done += rollout.numel()
         policy_rows = self.discriminator_rows(rollout.reshape(-1).select(*TRANSITION_KEYS))

@@ -75,6 +75,7 @@ from torchrl_causal.objectives import ExpertFlaggedSACLoss, add_absorbing_transi
 from torchrl_causal.trainers.base import Trainer
 from torchrl_causal.trainers.collection import ResumableCollector
 from torchrl_causal.trainers.update import ActorCriticUpdate
+from torchrl_causal.trainers.warm_start import behaviour_clone
 
 __all__ = ["OffPolicyILTrainer"]
 
@@ -240,16 +241,13 @@ class OffPolicyILTrainer(Trainer):
         settings), before the first env step."""
         updates = self._required_warm_start().bc_updates
         optimizer = instantiate(self.cfg.algo.actor_optimizer)(list(self.loss.actor_network_params.flatten_keys().values()))
-        for step in range(1, updates + 1):
+
+        def nll() -> torch.Tensor:
             batch = self.expert_buffer.sample()
             with matmul_precision(self.precision, self.device):
-                nll = self.loss.behaviour_cloning_nll(batch)
-            optimizer.zero_grad(set_to_none=True)
-            nll.backward()
-            torch.nn.utils.clip_grad_norm_(optimizer.param_groups[0]["params"], self.cfg.algo.max_grad_norm)
-            optimizer.step()
-            if step % 1000 == 0 or step == updates:
-                log.info("warm start: behaviour cloning %d/%d, expert action NLL %.3f", step, updates, nll.item())
+                return self.loss.behaviour_cloning_nll(batch)
+
+        behaviour_clone(nll, optimizer, updates, self.cfg.algo.max_grad_norm)
 
     def fit_critics(self) -> None:
         """Warm start, part 2: ``warm_start.critic_updates`` critic-only updates on expert and
