@@ -431,7 +431,7 @@ def _cases(trained: Path) -> list[Case]:
         # refuses an env that cannot render with Route Choice)
         Case("filmstrip labels mismatch", F, [f"runs=[{in_run}]", "labels=[a,b]", "out={root}/strip.png"], "labels", setup=run),
         Case("filmstrip missing run", F, ["runs=[{root}/nowhere]", "out={root}/strip.png"], "nowhere"),
-        Case("filmstrip zero frames", F, [f"runs=[{in_run}]", "frames=0", "out={root}/strip.png"], "frames >= 2", setup=run),
+        Case("filmstrip zero frames", F, [f"runs=[{in_run}]", "frames=0", "out={root}/strip.png"], "it must be >= 2", setup=run),
         # ---- archive
         Case("archive missing runs", X, ["runs={root}/nowhere", "out={root}/archive"], "nowhere"),
         Case("archive out inside runs", X, ["runs={root}", "out={root}/inside"], "must not contain", setup=run),

@@ -197,22 +197,23 @@ class GustProcess:
 class PrevailingGustProcess(GustProcess):
     """A :class:`GustProcess` whose gusts blow around a prevailing direction.
 
-    A gust's direction is uniform on the arc ``direction ± spread * pi`` (radians, the
+    A gust's direction is uniform on the arc ``prevailing ± spread * pi`` (radians, the
     direction the wind blows towards: 0 is +x, ``pi / 2`` is +y), so ``spread = 1`` is the
     uniform direction of :class:`GustProcess`; the period, probability and magnitudes are
     :class:`GustProcess`'s. It draws the same three uniforms per gust as its base.
 
-    The mean unit direction of its gusts is ``sinc(spread) * (cos direction, sin direction)``
+    The mean unit direction of its gusts is ``sinc(spread) * (cos prevailing, sin prevailing)``
     with ``sinc(x) = sin(pi x) / (pi x)`` (the mean of ``cos`` over the arc).
 
     Examples:
-        >>> process = PrevailingGustProcess(probability=1.0, direction=math.pi / 2, spread=0.25)
+        >>> process = PrevailingGustProcess(probability=1.0, prevailing=math.pi / 2, spread=0.25)
         >>> angles = torch.atan2(*process.draw((4096,), generator=torch.Generator().manual_seed(0)).flip(-1).unbind(-1))
         >>> bool(((angles - math.pi / 2).abs() <= math.pi / 4 + 1e-6).all())
         True
     """
 
-    direction: float = 0.0
+    # Not `direction`: that is GustProcess's static method reading a gust's unit direction.
+    prevailing: float = 0.0
     spread: float = 1.0
 
     def __post_init__(self) -> None:
@@ -221,13 +222,13 @@ class PrevailingGustProcess(GustProcess):
             raise InvalidValueError(f"gust spread must lie in [0, 1], got {self.spread}")
 
     def angle(self, uniform: torch.Tensor) -> torch.Tensor:
-        return self.direction + 2 * math.pi * self.spread * (uniform - 0.5)
+        return self.prevailing + 2 * math.pi * self.spread * (uniform - 0.5)
 
     def mean_direction(self) -> tuple[float, float]:
         """``E[unit direction | a gust blows]`` as ``(x, y)`` (the closed form above)."""
         x = math.pi * self.spread
         length = math.sin(x) / x if x > 0 else 1.0
-        return length * math.cos(self.direction), length * math.sin(self.direction)
+        return length * math.cos(self.prevailing), length * math.sin(self.prevailing)
 
 
 @dataclass(frozen=True)
@@ -246,12 +247,12 @@ class PriorShift:
 
     Examples:
         >>> shift = PriorShift()
-        >>> round(math.degrees(shift.process("train").direction)), round(math.degrees(shift.process("deploy").direction))
+        >>> round(math.degrees(shift.process("train").prevailing)), round(math.degrees(shift.process("deploy").prevailing))
         (45, -135)
     """
 
-    train: GustProcess = PrevailingGustProcess(probability=0.25, direction=math.pi / 4, spread=0.25)
-    deploy: GustProcess = PrevailingGustProcess(probability=0.25, direction=-3 * math.pi / 4, spread=0.25)
+    train: GustProcess = PrevailingGustProcess(probability=0.25, prevailing=math.pi / 4, spread=0.25)
+    deploy: GustProcess = PrevailingGustProcess(probability=0.25, prevailing=-3 * math.pi / 4, spread=0.25)
 
     def process(self, regime: str) -> GustProcess:
         """The gust process of ``regime``."""
@@ -313,8 +314,8 @@ class DivertedCompass:
     Examples:
         >>> sensor = DivertedCompass(diversion=0.5, noise_std=0.0)
         >>> north, gust_east = torch.tensor([[0.0, 1.0]]), torch.tensor([[3.0, 0.0]])
-        >>> sensor.needle(north, gust_east).round(decimals=4).tolist()  # half-way to the wind
-        [[0.7071, 0.7071]]
+        >>> sensor.needle(north, gust_east)  # half-way to the wind
+        tensor([[0.7071, 0.7071]])
         >>> torch.equal(sensor.needle(north, torch.zeros(1, 2)), north)  # calm: the heading
         True
     """

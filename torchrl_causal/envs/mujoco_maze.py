@@ -557,8 +557,8 @@ class MujocoMazeEnv(GustConfoundedEnv):
         """
         index = batch_rows(self.simulator.num_envs, rows)
         view = self.simulator.overview_camera() if camera is None else self.simulator.camera(camera)
-        frames = [self.simulator.render(i, width=width, height=height, camera=view) for i in index]
-        frames = np.stack(frames) if frames else np.empty((0, height, width, 3), dtype=np.uint8)
+        drawn = [self.simulator.render(i, width=width, height=height, camera=view) for i in index]
+        frames = np.stack(drawn) if drawn else np.empty((0, height, width, 3), dtype=np.uint8)
         return frames if rows is not None else frames.reshape(*self.batch_size, height, width, 3)
 
     def close(self, *, raise_if_closed: bool = True) -> None:

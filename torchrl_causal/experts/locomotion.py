@@ -37,7 +37,7 @@ import math
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, TypedDict
+from typing import Any, TypedDict, cast
 
 import torch
 from tensordict.nn import NormalParamExtractor, TensorDictModule
@@ -350,7 +350,7 @@ def train_locomotion(
     def evaluate() -> dict[str, float]:
         body = actor.module[0].module[0]
         result = evaluate_locomotion(body, skill=skill, envs=config.eval_envs, steps=config.eval_steps)
-        run.keep_if_best(counters, body, result)
+        run.keep_if_best(cast("dict[str, Any]", counters), body, result)  # a TypedDict is not a MutableMapping to mypy
         return result
 
     remaining = config.total_steps - counters["steps"]

@@ -43,7 +43,7 @@ import logging
 import math
 import shutil
 import time
-from collections.abc import Callable, Collection, Iterable, Iterator, Mapping
+from collections.abc import Callable, Collection, Iterable, Iterator, Mapping, MutableMapping
 from contextlib import contextmanager
 from dataclasses import asdict
 from pathlib import Path
@@ -211,7 +211,7 @@ class SkillRunDirectory:
         if "best_body" in state:
             atomic_save(state["best_body"], self.best_body)
 
-    def keep_if_best(self, counters: dict[str, Any], body: nn.Module, result: Mapping[str, float]) -> float:
+    def keep_if_best(self, counters: MutableMapping[str, Any], body: nn.Module, result: Mapping[str, float]) -> float:
         """Saves ``body`` as the best when the evaluation ``result`` beats ``counters["best_score"]``
         (:func:`upright_speed`, which it returns)."""
         score = upright_speed(result)
