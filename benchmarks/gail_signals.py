@@ -20,12 +20,12 @@ per round, what tells a learning GAIL from a stuck one:
         algo.episodes_per_round=4 demos.episodes=30 [+recipe=gail_bc_start]
 
 It writes only the demonstrations (under ``run_root``, as a run would) and a scratch run
-directory under ``run_root`` that it removes.
+directory in a fresh temporary folder that it removes.
 """
 
 from __future__ import annotations
 
-import shutil
+import tempfile
 import time
 
 import torch
@@ -52,8 +52,10 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     cfg = compose_config([*args.overrides, "progress_bar=false"])
-    cfg.run_dir = f"{cfg.run_root}/_signals_scratch"
-    shutil.rmtree(cfg.run_dir, ignore_errors=True)
+    # A fresh temporary folder, never a fixed name under run_root: a user's folder of that name
+    # would be deleted.
+    scratch = tempfile.TemporaryDirectory(prefix="gail_signals_")
+    cfg.run_dir = scratch.name
     window = make_window(cfg)
     trainer = get_class(cfg.algo.trainer)(cfg, RunDirectory(cfg.run_dir), window, Evaluator(cfg, window).periodic)
     assert isinstance(trainer, GAILTrainer), f"{cfg.algo.name} is not GAIL"
@@ -104,7 +106,7 @@ def main() -> None:
             flush=True,
         )
     trainer.close()
-    shutil.rmtree(cfg.run_dir, ignore_errors=True)
+    scratch.cleanup()
 
 
 if __name__ == "__main__":
