@@ -3,8 +3,8 @@
     cd benchmarks && OMP_NUM_THREADS=1 python run_cost.py [--steps 16000] [HYDRA OVERRIDES...]
 
 1. **A short real run, in this process.** The training command (by default the AntMaze-Medium
-   C-SQIL recipe, ``env=antmaze_medium +row=c_sqil scale=cpu_ant +recipe=goal_valued_bc_anchored``,
-   compiled as ``scale=cpu_ant`` has it) runs through :func:`torchrl_causal.lifecycle.run` with
+   C-SQIL recipe, ``env=antmaze_medium +row=c_sqil scale=cpu_ant +recipe=goal_valued_bc_anchored
+   compile=true``, compiled as the long runs are) runs through :func:`torchrl_causal.lifecycle.run` with
    ``algo.total_steps=--steps``, a smaller warm start and fewer evaluation episodes, under a
    :class:`~torchrl_causal.experiment.timing.PartTimer`: the trainer's own parts (setup, warm
    start, compile, updates, replay sampling, collection, evaluation, checkpoints) in CPU
@@ -50,7 +50,8 @@ from torchrl_causal.experiment.provenance import cpu_model
 from torchrl_causal.experiment.timing import OTHER, PartTimer, cpu_seconds
 from torchrl_causal.lifecycle import run
 
-RECIPE = ["env=antmaze_medium", "+row=c_sqil", "scale=cpu_ant", "+recipe=goal_valued_bc_anchored"]
+# compile=true as every long run passes it: scale=cpu_ant alone leaves the update eager.
+RECIPE = ["env=antmaze_medium", "+row=c_sqil", "scale=cpu_ant", "+recipe=goal_valued_bc_anchored", "compile=true"]
 PARTS = (
     "setup",
     "warm start (BC)",
