@@ -310,3 +310,19 @@ def test_the_ablation_configs_train_at_the_2_core_budget_under_their_shift(exper
     assert cfg.env.shift == shift and cfg.eval.final_episodes == budget.eval.final_episodes
     # demonstrations at the run's own horizon, strength and shift
     assert f"-h{cfg.env.horizon}-cs{cfg.env.confounding_strength}{'-prior' if shift else ''}-n" in cfg.demos.path
+
+
+@pytest.mark.parametrize("sensor", [CompassSensor(), DivertedCompass(diversion=0.4)], ids=["compass", "diverted"])
+def test_each_sensor_reads_its_closed_form_to_the_bit(sensor) -> None:
+    # W = rotate(tanh(weighted signal [+ gust] + noise_std * noise), rotation), the noise drawn
+    # first from the generator: written out here per sensor, independently of GustSensor.read.
+    generator = torch.Generator().manual_seed(3)
+    signal = torch.nn.functional.normalize(torch.randn(64, 2, generator=generator), dim=-1)
+    gust = PriorShift().train.draw((64,), generator=generator)
+    noise = torch.randn(signal.shape, generator=torch.Generator().manual_seed(5))
+    if isinstance(sensor, DivertedCompass):
+        raw = sensor.signal_weight * sensor.needle(signal, gust) + sensor.noise_std * noise
+    else:
+        raw = sensor.signal_weight * signal + sensor.gust_weight * GustProcess.direction(gust) + sensor.noise_std * noise
+    expected = rotate(torch.tanh(raw), 0.7)
+    assert torch.equal(sensor.read(signal, gust, rotation=0.7, generator=torch.Generator().manual_seed(5)), expected)

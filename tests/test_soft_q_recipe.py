@@ -279,12 +279,12 @@ def test_behaviour_cloning_lowers_the_nll_toward_the_expert() -> None:
     assert loss.behaviour_cloning_nll(batch).item() < before - 1.0
 
 
-def test_a_critic_step_moves_only_the_critics_and_the_targets() -> None:
+def _adam_update(loss):
+    """Adam (lr 1e-2) on every part of ``loss``, a fast target update and clipped gradients."""
     from functools import partial
 
-    _, loss = _actor_and_loss()
     adam = partial(torch.optim.Adam, lr=1e-2)
-    update = ActorCriticUpdate(
+    return ActorCriticUpdate(
         loss,
         actor_optimizer=adam,
         critic_optimizer=adam,
@@ -292,6 +292,11 @@ def test_a_critic_step_moves_only_the_critics_and_the_targets() -> None:
         target_update=partial(SoftUpdate, tau=0.5),
         max_grad_norm=1.0,
     )
+
+
+def test_a_critic_step_moves_only_the_critics_and_the_targets() -> None:
+    _, loss = _actor_and_loss()
+    update = _adam_update(loss)
     snapshot = {name: p.detach().clone() for name, p in loss.named_parameters()}
     targets = [t.clone() for t in loss.target_qvalue_network_params.values(True, True)]
     update.critic_step(_batch())
@@ -302,18 +307,8 @@ def test_a_critic_step_moves_only_the_critics_and_the_targets() -> None:
 
 
 def test_the_update_sums_every_loss_term() -> None:
-    from functools import partial
-
     _, loss = _actor_and_loss(bc_weight=0.4)
-    adam = partial(torch.optim.Adam, lr=1e-2)
-    update = ActorCriticUpdate(
-        loss,
-        actor_optimizer=adam,
-        critic_optimizer=adam,
-        alpha_optimizer=adam,
-        target_update=partial(SoftUpdate, tau=0.5),
-        max_grad_norm=1.0,
-    )
+    update = _adam_update(loss)
     torch.manual_seed(1)  # the same action samples in both forwards
     total, _ = update.losses(_batch())
     torch.manual_seed(1)

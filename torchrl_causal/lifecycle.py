@@ -366,6 +366,15 @@ def evaluation_home(run_dir: str | Path, run_root: str | Path = "runs") -> Path:
     return Path(run_root) / EVALUATED_DIR / str(run.read_config().run_name)
 
 
+def _evaluation_settings(
+    stored: RunDirectory, episodes: int, num_envs: int | None, seed: int, confounding_strength: float | None
+) -> tuple[int, str]:
+    """The simulations an evaluation runs (the run's ``eval.num_envs`` by default, never more than
+    ``episodes``) and the name of its settings in its record's file name (:func:`record_settings`)."""
+    num_envs = min(int(stored.read_config().eval.num_envs if num_envs is None else num_envs), int(episodes))
+    return num_envs, record_settings(int(episodes), int(seed), num_envs, confounding_strength)
+
+
 def evaluation_record(
     run_dir: str | Path,
     regime: str = "deploy",
@@ -377,9 +386,7 @@ def evaluation_record(
     run_root: str | Path = "runs",
 ) -> Path:
     """Where :func:`evaluate_run` with these settings writes its record (see :func:`evaluation_home`)."""
-    stored = RunDirectory(run_dir)
-    num_envs = min(int(stored.read_config().eval.num_envs if num_envs is None else num_envs), int(episodes))
-    settings = record_settings(int(episodes), int(seed), num_envs, confounding_strength)
+    _, settings = _evaluation_settings(RunDirectory(run_dir), episodes, num_envs, seed, confounding_strength)
     return RunDirectory(evaluation_home(run_dir, run_root)).eval_path(regime, settings)
 
 
@@ -413,8 +420,7 @@ def evaluate_run(
     """
     _check_evaluation(regime, episodes, num_envs, trajectories, confounding_strength)
     stored = RunDirectory(run_dir)
-    num_envs = min(int(stored.read_config().eval.num_envs if num_envs is None else num_envs), int(episodes))
-    settings = record_settings(int(episodes), int(seed), num_envs, confounding_strength)
+    num_envs, settings = _evaluation_settings(stored, episodes, num_envs, seed, confounding_strength)
     record = evaluation_record(
         run_dir, regime, episodes, num_envs=num_envs, seed=seed, confounding_strength=confounding_strength, run_root=run_root
     )

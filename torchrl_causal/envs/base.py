@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import inspect
 import math
-from abc import abstractmethod
+from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cache
@@ -72,6 +72,7 @@ __all__ = [
     "DivertedCompass",
     "GustConfoundedEnv",
     "GustProcess",
+    "GustSensor",
     "PartialStepError",
     "PrevailingGustProcess",
     "PriorShift",
@@ -259,8 +260,42 @@ class PriorShift:
         return self.train if _validate_regime(regime) == "train" else self.deploy
 
 
+class GustSensor(ABC):
+    """What the sensors of W share: ``W = rotate(tanh(mean(signal, gust) + noise), rotation)``.
+
+    ``noise ~ N(0, noise_std**2)`` per component, drawn from ``generator`` for the whole
+    batch; subclasses give the noise-free reading :meth:`mean` and the field ``noise_std``.
+    One :meth:`read` serves every sensor, so that each draws its noise in the same order
+    from the env's generator and the shifts differ only in what the needle points at.
+
+    Examples:
+        >>> sensor = DivertedCompass(diversion=0.0, noise_std=0.0)
+        >>> north, calm = torch.tensor([[0.0, 1.0]]), torch.zeros(1, 2)
+        >>> torch.equal(sensor.read(north, calm, rotation=0.0), torch.tanh(sensor.mean(north, calm)))
+        True
+    """
+
+    noise_std: float
+
+    @abstractmethod
+    def mean(self, signal: torch.Tensor, gust: torch.Tensor) -> torch.Tensor:
+        """The reading before noise and ``tanh``, ``signal``'s shape."""
+
+    def read(
+        self,
+        signal: torch.Tensor,
+        gust: torch.Tensor,
+        *,
+        rotation: float | torch.Tensor,
+        generator: torch.Generator | None = None,
+    ) -> torch.Tensor:
+        """The sensor reading for a batch of ``signal`` (``batch + (2,)``) under ``gust``."""
+        noise = torch.randn(signal.shape, generator=generator, device=signal.device, dtype=signal.dtype)
+        return rotate(torch.tanh(self.mean(signal, gust) + self.noise_std * noise), rotation)
+
+
 @dataclass(frozen=True)
-class CompassSensor:
+class CompassSensor(GustSensor):
     """The imitator's extra sensor W: a collider of the true signal and the gust.
 
     ``W = rotate(tanh(signal_weight * signal + gust_weight * gust_direction + noise), rotation)``
@@ -284,22 +319,13 @@ class CompassSensor:
     gust_weight: float = 0.1
     noise_std: float = 0.05
 
-    def read(
-        self,
-        signal: torch.Tensor,
-        gust: torch.Tensor,
-        *,
-        rotation: float | torch.Tensor,
-        generator: torch.Generator | None = None,
-    ) -> torch.Tensor:
-        """The sensor reading for a batch of ``signal`` (``batch + (2,)``) under ``gust``."""
-        noise = torch.randn(signal.shape, generator=generator, device=signal.device, dtype=signal.dtype)
-        raw = self.signal_weight * signal + self.gust_weight * GustProcess.direction(gust) + self.noise_std * noise
-        return rotate(torch.tanh(raw), rotation)
+    def mean(self, signal: torch.Tensor, gust: torch.Tensor) -> torch.Tensor:
+        """``signal_weight * signal + gust_weight * gust_direction`` (noise-free, pre-``tanh``)."""
+        return self.signal_weight * signal + self.gust_weight * GustProcess.direction(gust)
 
 
 @dataclass(frozen=True)
-class DivertedCompass:
+class DivertedCompass(GustSensor):
     """The sensor W of the P(U)-shift regime: a needle the wind turns towards its direction.
 
     ``W = rotate(tanh(signal_weight * rotate(signal, diversion * delta) + noise), rotation)``
@@ -339,18 +365,9 @@ class DivertedCompass:
         calm = gust.norm(dim=-1) == 0
         return rotate(signal, self.diversion * torch.where(calm, torch.zeros_like(delta), delta))
 
-    def read(
-        self,
-        signal: torch.Tensor,
-        gust: torch.Tensor,
-        *,
-        rotation: float | torch.Tensor,
-        generator: torch.Generator | None = None,
-    ) -> torch.Tensor:
-        """The sensor reading for a batch of ``signal`` (``batch + (2,)``) under ``gust``."""
-        noise = torch.randn(signal.shape, generator=generator, device=signal.device, dtype=signal.dtype)
-        raw = self.signal_weight * self.needle(signal, gust) + self.noise_std * noise
-        return rotate(torch.tanh(raw), rotation)
+    def mean(self, signal: torch.Tensor, gust: torch.Tensor) -> torch.Tensor:
+        """``signal_weight`` times the :meth:`needle` (noise-free, pre-``tanh``)."""
+        return self.signal_weight * self.needle(signal, gust)
 
 
 def _copy_state(value: Any, device: torch.device | None = None) -> Any:
@@ -810,7 +827,7 @@ class GustConfoundedEnv(ConfoundedEnv):
         return self.prior_shift.process(self.regime) if self.shift == "prior" else self.gust_process
 
     @property
-    def sensor(self) -> CompassSensor | DivertedCompass:
+    def sensor(self) -> GustSensor:
         """The sensor W reads through: :attr:`compass` under the rotation shift, a
         :class:`DivertedCompass` diverted by ``confounding_strength`` under the prior shift
         (the same sensor in both regimes)."""

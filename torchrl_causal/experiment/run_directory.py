@@ -51,14 +51,14 @@ import socket
 from collections.abc import Callable, Collection, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, cast, overload
 
 import torch
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from torchrl_causal.algorithms import Row
 from torchrl_causal.data.demonstrations import tensor_bytes
-from torchrl_causal.errors import InvalidValueError, MissingFileError, TorchRLCausalError
+from torchrl_causal.errors import InvalidValueError, MissingAttributeError, MissingFileError, TorchRLCausalError
 
 __all__ = [
     "CONFIG_FILE",
@@ -74,6 +74,7 @@ __all__ = [
     "RUN_ENTRIES",
     "CheckpointError",
     "CheckpointWriteError",
+    "EntryPath",
     "ConfigMismatchError",
     "ForeignFilesError",
     "RunFileError",
@@ -477,6 +478,47 @@ def check_owned(folder: Path, foreign: Callable[[], list[Path]], remedy: str) ->
         raise ForeignFilesError(f"{folder} is not a run directory (it holds {shown}, which no run wrote): nothing was changed; {remedy}")
 
 
+class EntryPath:
+    """A read-only attribute of a run folder: ``EntryPath("a", "b")`` reads ``self.path / "a" / "b"``.
+
+    One declaration per entry, so that each folder class names its files in one line each
+    (:class:`RunDirectory`, :class:`~torchrl_causal.experts.skill_run.SkillRunDirectory`).
+    The owner keeps its folder in ``self.path``.
+
+    Examples:
+        >>> class Folder:
+        ...     log = EntryPath("logs", "train.log")
+        ...     def __init__(self, path):
+        ...         self.path = Path(path)
+        >>> Folder("runs/x").log.as_posix()
+        'runs/x/logs/train.log'
+        >>> Folder("runs/x").log = "elsewhere"
+        Traceback (most recent call last):
+        ...
+        torchrl_causal.errors.MissingAttributeError: log is the path of an entry below the folder; it cannot be set
+    """
+
+    def __init__(self, *parts: str) -> None:
+        self.parts = parts
+        self.name = "/".join(parts)
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    @overload
+    def __get__(self, instance: None, owner: type | None = None) -> EntryPath: ...
+    @overload
+    def __get__(self, instance: object, owner: type | None = None) -> Path: ...
+    def __get__(self, instance: Any, owner: type | None = None) -> Path | EntryPath:
+        if instance is None:
+            return self
+        return Path(instance.path).joinpath(*self.parts)
+
+    def __set__(self, instance: object, value: object) -> None:
+        # A data descriptor, so that an assignment is refused as a property's would be.
+        raise MissingAttributeError(f"{self.name} is the path of an entry below the folder; it cannot be set")
+
+
 class RunDirectory:
     """The files of one run (see the module docstring).
 
@@ -492,57 +534,22 @@ class RunDirectory:
 
     # ------------------------------------------------------------------ paths
 
-    @property
-    def config_file(self) -> Path:
-        return self.path / CONFIG_FILE
-
-    @property
-    def window_file(self) -> Path:
-        return self.path / WINDOW_FILE
-
-    @property
-    def status_file(self) -> Path:
-        return self.path / STATUS_FILE
-
-    @property
-    def code_file(self) -> Path:
-        return self.path / CODE_FILE
-
-    @property
-    def train_log(self) -> Path:
-        return self.path / TRAIN_LOG
-
-    @property
-    def log_dir(self) -> Path:
-        return self.path / LOG_DIR
-
-    @property
-    def replay_dir(self) -> Path:
-        return self.path / REPLAY_DIR
-
-    @property
-    def lock_file(self) -> Path:
-        return self.path / LOCK_FILE
-
-    @property
-    def policy_identity_file(self) -> Path:
-        return self.path / CHECKPOINT_DIR / POLICY_DIGEST_FILE
-
-    @property
-    def train_curve_file(self) -> Path:
-        return self.log_dir / "scalars" / f"{TRAIN_CURVE}.csv"
+    config_file = EntryPath(CONFIG_FILE)
+    window_file = EntryPath(WINDOW_FILE)
+    status_file = EntryPath(STATUS_FILE)
+    code_file = EntryPath(CODE_FILE)
+    train_log = EntryPath(TRAIN_LOG)
+    log_dir = EntryPath(LOG_DIR)
+    replay_dir = EntryPath(REPLAY_DIR)
+    lock_file = EntryPath(LOCK_FILE)
+    policy_identity_file = EntryPath(CHECKPOINT_DIR, POLICY_DIGEST_FILE)
+    train_curve_file = EntryPath(LOG_DIR, "scalars", f"{TRAIN_CURVE}.csv")
+    last_checkpoint = EntryPath(CHECKPOINT_DIR, "last.pt")
+    best_checkpoint = EntryPath(CHECKPOINT_DIR, "best.pt")
 
     def success_curve_file(self, regime: str) -> Path:
         """The periodic evaluations' success rates in ``regime`` (a CSVLogger scalar file)."""
         return self.log_dir / "scalars" / f"{SUCCESS_CURVE.format(regime=regime)}.csv"
-
-    @property
-    def last_checkpoint(self) -> Path:
-        return self.path / CHECKPOINT_DIR / "last.pt"
-
-    @property
-    def best_checkpoint(self) -> Path:
-        return self.path / CHECKPOINT_DIR / "best.pt"
 
     def eval_path(self, regime: str, settings: str | None = None) -> Path:
         """Where an evaluation record lives: ``eval/<regime>.json`` for the final evaluation

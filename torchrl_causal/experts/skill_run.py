@@ -57,7 +57,14 @@ from torchrl.record.loggers.csv import CSVLogger
 
 from torchrl_causal.command_line import OneLineParser, count, non_negative, one_line_errors
 from torchrl_causal.errors import InvalidValueError, TorchRLCausalError
-from torchrl_causal.experiment.run_directory import atomic_save, atomic_write_text, check_owned, foreign_entries, load_checkpoint
+from torchrl_causal.experiment.run_directory import (
+    EntryPath,
+    atomic_save,
+    atomic_write_text,
+    check_owned,
+    foreign_entries,
+    load_checkpoint,
+)
 from torchrl_causal.progress import progress
 
 __all__ = [
@@ -170,13 +177,8 @@ class SkillRunDirectory:
     def __repr__(self) -> str:
         return f"SkillRunDirectory({str(self.path)!r})"
 
-    @property
-    def best_body(self) -> Path:
-        return self.path / BEST_BODY
-
-    @property
-    def resume_state(self) -> Path:
-        return self.path / RESUME_STATE
+    best_body = EntryPath(BEST_BODY)
+    resume_state = EntryPath(RESUME_STATE)
 
     def foreign_entries(self) -> list[Path]:
         """What the folder holds that no run of this trainer wrote (empty for a missing or empty folder).
