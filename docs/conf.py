@@ -9,17 +9,18 @@ this package's own objects must resolve.
 
 from __future__ import annotations
 
-import importlib
 import os
-import pkgutil
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # the checkout's package, installed or not
+sys.path.insert(0, str(ROOT / "docs"))  # apihomes, this site's extension
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import torchrl_causal  # noqa: E402  (after the path above)
+import apihomes  # noqa: E402  (after the paths above)
+
+import torchrl_causal  # noqa: E402
 
 project = "torchrl-causal"
 author = "torchrl-causal contributors"
@@ -32,6 +33,7 @@ extensions = [
     "sphinx.ext.napoleon",  # the docstrings' Google style (Args:, Returns:, Raises:, Examples:)
     "sphinx.ext.viewcode",
     "myst_parser",  # the README, usage guide and results are Markdown
+    "apihomes",  # a reference through any import path of an object resolves to its one page
 ]
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
@@ -63,23 +65,13 @@ html_title = f"torchrl-causal {release}"
 html_theme_options = {"description": "TorchRL components for causal imitation learning", "fixed_sidebar": True, "page_width": "1180px"}
 
 
-def _aliases() -> list[str]:
-    """Modules that only forward names defined elsewhere: the old import paths kept for
-    archived configs (``envs.planner`` -> ``experts.planner``) and the ``python -m
-    torchrl_causal.<command>`` aliases. Each object is documented once, where it is defined
-    (documenting an alias too is a duplicate description, a warning)."""
-    found = []
-    for info in pkgutil.walk_packages(torchrl_causal.__path__, "torchrl_causal."):
-        if info.ispkg:
-            continue
-        module = importlib.import_module(info.name)
-        names = getattr(module, "__all__", None)
-        if names and all(getattr(getattr(module, name), "__module__", info.name) != info.name for name in names):
-            found.append(info.name)
-    return found
-
-
-autosummary_context = {"aliases": _aliases()}
+# Each public object is documented once, on the page of its shortest import path (apihomes.py
+# says how that is chosen); the other pages listing it in ``__all__`` link there.
+_modules = apihomes.documented_modules()
+autosummary_context = {
+    "documented_modules": [module.__name__ for module in _modules],
+    "pages": apihomes.members_by_page(_modules, apihomes.package_homes()),
+}
 
 # Offline: other libraries' objects cannot be resolved (no inventories), so each package is
 # named here; a reference into torchrl_causal that does not resolve still fails the build.
@@ -141,6 +133,10 @@ EXTERNAL = (
     "hashlib",
     "socket",
     "sys",
+    "platform",
+    "time",
+    "resource",
+    "gymnasium_robotics",
 )
 nitpicky = True
 # Names of those libraries that the type hints carry unqualified (from __future__ annotations).

@@ -99,7 +99,7 @@ class Row:
 
     @property
     def label(self) -> str:
-        """The row's column header: ``C-SQIL``, ``SQIL (window-matched)``, ``C-BC (no X)``."""
+        """The row's column header, such as ``C-SQIL``, ``SQIL (window-matched)``, ``C-BC (no X)``."""
         label = algorithm(self.algorithm).label
         if self.causal and self.algorithm != "expert":
             label = f"C-{label}"
@@ -124,11 +124,11 @@ class Row:
         return cls(name, causal, window_matched, tuple(dropped.split("-")) if dropped else ())
 
 
-#: The algorithm families the paper's Table 1 trains, in its order: each has a causal and a
+#: The algorithm families the paper's Table 1 trains, in its order; each has a causal and a
 #: non-causal row (the tables' effect checks and the figures' panels go by them).
 TABLE1_FAMILIES: tuple[str, ...] = ("bc", "gail", "sqil", "iq_learn")
 
-#: The paper's Table 1, in its order: the expert, the causal algorithms, the same non-causal.
+#: The paper's Table 1, in its order — the expert, the causal algorithms, the same non-causal.
 TABLE1_ROWS: tuple[Row, ...] = (
     Row("expert"),
     *(Row(name, causal=True) for name in TABLE1_FAMILIES),

@@ -23,7 +23,7 @@ from collections.abc import Sequence
 
 __all__ = ["COMMANDS", "main"]
 
-#: The command lines, in the order a new user meets them: the registry of ``torchrl-causal
+#: The command lines, in the order a new user meets them — the registry of ``torchrl-causal
 #: <command>``, one line each (``cli/<command>.py`` holds its ``main``).
 COMMANDS = (
     "train",

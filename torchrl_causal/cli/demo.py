@@ -99,7 +99,7 @@ def demo_overrides(algo: str, causal: bool, run_root: str | Path) -> list[str]:
     return [*DEMO_SETTINGS, f"algo={algo}", *DEMO_ALGOS[algo], f"causal={str(causal).lower()}", f"run_root={run_root}"]
 
 
-#: The side-by-side video of the report: one deploy-regime episode of each run, left to right.
+#: The side-by-side video of the report — one deploy-regime episode of each run, left to right.
 SIDE_BY_SIDE: tuple[tuple[str, str, bool], ...] = (("Causal SQIL", "sqil", True), ("SQIL", "sqil", False))
 SIDE_BY_SIDE_FILE = "deploy_side_by_side.gif"
 

@@ -89,7 +89,7 @@ Shift = Literal["rotation", "prior"]
 #: ``"prior"`` moves P(U) (see the module docstring).
 SHIFTS: tuple[str, ...] = ("rotation", "prior")
 
-#: TorchRL's partial-step entry of a step's input: a batch-shaped bool mask of the envs to
+#: TorchRL's partial-step entry of a step's input — a batch-shaped bool mask of the envs to
 #: step (the others are skipped). ``EnvBase.step`` passes it on to a batch-locked env's
 #: ``_step`` when it is neither all True nor all False (it drops an all-True mask and skips
 #: the env's ``_step`` altogether for an all-False one).
@@ -568,7 +568,7 @@ class ConfoundedEnv(EnvBase):
 
     @property
     def causal_template(self) -> TimeSliceTemplate:
-        """This env's template: :meth:`slice_template` of its class."""
+        """This env's template, :meth:`slice_template` of its class."""
         return self.slice_template()
 
     def config(self) -> dict[str, object]:
@@ -785,7 +785,7 @@ class GustConfoundedEnv(ConfoundedEnv):
     Keeps the gust of the current step in :attr:`gust` (``batch + (2,)``), redrawn by
     :attr:`gust_process` at every multiple of its period, and reads the sensor W with
     :meth:`read_compass`. The gust is exposed under ``("scm", "U")``; subclasses add
-    ``scm_observation()`` to their ``_observation()`` and use :meth:`gust_penalty` in
+    ``scm_observation()`` to their ``_observation()`` and use :meth:`maze_reward` in
     their reward.
 
     Args:
@@ -822,13 +822,13 @@ class GustConfoundedEnv(ConfoundedEnv):
 
     @property
     def gusts(self) -> GustProcess:
-        """The gust process this env draws U from: :attr:`gust_process` under the rotation
+        """The gust process this env draws U from — :attr:`gust_process` under the rotation
         shift, the regime's process of :attr:`prior_shift` under the prior shift."""
         return self.prior_shift.process(self.regime) if self.shift == "prior" else self.gust_process
 
     @property
     def sensor(self) -> GustSensor:
-        """The sensor W reads through: :attr:`compass` under the rotation shift, a
+        """The sensor W reads through — :attr:`compass` under the rotation shift, a
         :class:`DivertedCompass` diverted by ``confounding_strength`` under the prior shift
         (the same sensor in both regimes)."""
         if self.shift == "prior":
@@ -837,7 +837,7 @@ class GustConfoundedEnv(ConfoundedEnv):
 
     @property
     def compass_rotation(self) -> float:
-        """Angle by which the sensor reading is rotated: ``strength * pi`` when deployed under
+        """Angle by which the sensor reading is rotated, ``strength * pi`` when deployed under
         the rotation shift, else 0 (always 0 under the prior shift)."""
         return self.confounding_strength * math.pi if self.regime == "deploy" and self.shift == "rotation" else 0.0
 

@@ -76,7 +76,7 @@ HUMANOID_COLUMNS = {
     "J": slice(_NQ, _NQ + _NV),
 }
 HUMANOID_STATE_WIDTH = _COM + 3
-#: The standing start's noise: uniform half-width on qpos, standard deviation of qvel.
+#: The standing start's noise — uniform half-width on qpos, standard deviation of qvel.
 START_QPOS_NOISE = 0.01
 START_QVEL_NOISE = 0.01
 
@@ -148,11 +148,11 @@ def standing_qpos(model: mujoco.MjModel, yaw: np.ndarray, *, clearance: float = 
 #: The skill's variables, in OGBench's skill-observation order (its ``online-humanoid`` ``_get_obs``):
 #: everything the maze expert reads except the position P, so the skill is translation-invariant.
 HUMANOID_SKILL_VARIABLES = ("A", "H", "E", "V", "C", "J")
-#: The skill's observation: those 67 dims and the commanded unit direction (2).
+#: The skill's observation — those 67 dims and the commanded unit direction (2).
 HUMANOID_SKILL_OBSERVATION_DIM = 67 + 2
 _SKILL_COLUMNS = np.concatenate([np.arange(HUMANOID_STATE_WIDTH)[HUMANOID_COLUMNS[v]] for v in HUMANOID_SKILL_VARIABLES])
 _COMMAND = HUMANOID_SKILL_OBSERVATION_DIM - 2
-#: Where the skill observation's world-frame ground-plane vectors start: C's x, y (the
+#: Where the skill observation's world-frame ground-plane vectors start — C's x, y (the
 #: centre-of-mass velocity), ``qvel``'s first two (the root's linear velocity, world frame for a
 #: free joint) and the command; the rest of the observation is egocentric or yaw-free.
 COMMAND_FRAME_VECTORS = (int(np.flatnonzero(_SKILL_COLUMNS == _COM)[0]), int(np.flatnonzero(_SKILL_COLUMNS == _NQ)[0]), _COMMAND)

@@ -343,7 +343,7 @@ class MujocoMazeEnv(GustConfoundedEnv):
     Args:
         maze: ``"medium"`` or ``"large"`` (the fixed task of :attr:`tasks`).
         batch_size: the env's batch shape; one MuJoCo simulation per element.
-        regime / confounding_strength / horizon / device / seed: see
+        regime, confounding_strength, horizon, device, seed: see
             :class:`~torchrl_causal.envs.base.ConfoundedEnv`.
         shift: ``"rotation"`` (default) or ``"prior"``: see
             :class:`~torchrl_causal.envs.base.GustConfoundedEnv`.
@@ -362,7 +362,7 @@ class MujocoMazeEnv(GustConfoundedEnv):
     latent_variables: ClassVar[tuple[str, ...]]
     #: the fixed task of each layout.
     tasks: ClassVar[Mapping[str, MazeTask]]
-    #: uniform start-position noise, as a fraction of a cell (gymnasium-robotics: 0.25).
+    #: uniform start-position noise, as a fraction of a cell (gymnasium-robotics uses 0.25).
     start_noise: ClassVar[float] = 0.25
     #: half-width of the uniform noise on the other initial ``qpos`` entries.
     qpos_noise: ClassVar[float] = 0.0

@@ -191,4 +191,5 @@ class RouteChoiceEnv(ConfoundedEnv):
     derived_config_keys = ("wind_probability",)
 
     def config(self) -> dict[str, object]:
+        """:meth:`ConfoundedEnv.config`, plus ``"wind_probability"``."""
         return {**super().config(), "wind_probability": str(self.wind_probability)}

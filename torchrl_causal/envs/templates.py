@@ -17,7 +17,7 @@ def _persistence(variables: str) -> list[tuple[str, str, int]]:
     return [(v, v, 1) for v in variables]
 
 
-#: Confounded AntMaze: P position, O orientation (hidden from the imitator), A joint
+#: Confounded AntMaze — P position, O orientation (hidden from the imitator), A joint
 #: angles, L torso linear velocity, T torso angular velocity, J joint velocities,
 #: W compass, X torques.
 ANTMAZE_TEMPLATE = TimeSliceTemplate(
@@ -44,7 +44,7 @@ ANTMAZE_TEMPLATE = TimeSliceTemplate(
     reward_slices="all",
 )
 
-#: Confounded HumanoidMaze: P position, A joint angles, H head height, E extremities,
+#: Confounded HumanoidMaze — P position, A joint angles, H head height, E extremities,
 #: V torso vertical, C centre-of-mass velocity (hidden from the imitator), J joint
 #: velocities, W ground vibration, X torques.
 HUMANOIDMAZE_TEMPLATE = TimeSliceTemplate(

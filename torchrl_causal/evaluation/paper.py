@@ -34,9 +34,9 @@ PAPER_TASKS: Mapping[str, str] = {
     "humanoidmaze_medium": "HumanoidMaze-Medium",
     "humanoidmaze_large": "HumanoidMaze-Large",
 }
-#: Training seeds per row (Appendix E: "All tasks used 3 seeds").
+#: Training seeds per row (Appendix E, "All tasks used 3 seeds").
 PAPER_SEEDS = 3
-#: Evaluation episodes per task (Appendix E: HumanoidMaze-Large 100, "the other tasks' 1000").
+#: Evaluation episodes per task (Appendix E, HumanoidMaze-Large 100, "the other tasks' 1000").
 PAPER_EPISODES: Mapping[str, int] = {"antmaze_medium": 1000, "antmaze_large": 1000, "humanoidmaze_medium": 1000, "humanoidmaze_large": 100}
 
 
@@ -64,7 +64,8 @@ def _rows(*figures: tuple[float, float, float, float, float | None, float | None
     return {label: PaperFigure(*figure) for label, figure in zip(labels, figures, strict=True)}
 
 
-#: task -> row label -> its figures (Appendix F's tab:raw-results and tab:episode-lengths).
+#: The published figures by task, then by row label (Appendix F's tables ``tab:raw-results``
+#: and ``tab:episode-lengths``).
 PAPER_RESULTS: Mapping[str, Mapping[str, PaperFigure]] = {
     "antmaze_medium": _rows(
         (-104.0, 87.5, 87.6, 1.0, 301, 57),

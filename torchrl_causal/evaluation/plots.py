@@ -41,7 +41,7 @@ __all__ = [
 ABLATION_AXES = {"k": "window size k", "horizon": "horizon H", "strength": "confounding strength"}
 
 
-#: What the success curves' band spans: every seed's curve lies inside it.
+#: What the success curves' band spans — every seed's curve lies inside it.
 BAND = "min-max over seeds"
 
 

@@ -115,15 +115,15 @@ TRAIN_CURVE = "eval/train_return"  # scalar logged at every periodic train-regim
 #: beside the training curve; a deploy one where a trainer evaluates in that regime too)
 SUCCESS_CURVE = "eval/{regime}_success"
 
-#: Every entry a run writes at the top of its directory: all that ``resume=false`` ever removes.
+#: Every entry a run writes at the top of its directory, all that ``resume=false`` ever removes.
 RUN_ENTRIES: frozenset[str] = frozenset(
     {CONFIG_FILE, WINDOW_FILE, STATUS_FILE, CODE_FILE, TRAIN_LOG, EVAL_DIR, LOG_DIR, CHECKPOINT_DIR, REPLAY_DIR, LOCK_FILE, WANDB_DIR}
 )
-#: The keys every run's ``config.yaml`` has: what tells it from another program's config.yaml.
+#: The keys every run's ``config.yaml`` has — what tells it from another program's config.yaml.
 _RUN_CONFIG_KEYS = ("algo", "env", "seed", "run_dir")
 _TEMPORARY = re.compile(r"^\..+\.tmp\d+$")  # what an atomic write killed midway leaves behind
 
-#: Config keys that change how a run executes or where it writes, never its numbers: they
+#: Config keys that change how a run executes or where it writes, never its numbers; they
 #: may differ between the attempts of one run (a resume on another machine, more threads).
 RUNTIME_KEYS: tuple[str, ...] = (
     "resume",

@@ -140,7 +140,7 @@ class LocomotionSkill:
         name: the CLI's ``--skill`` name.
         make_env: ``(batch_size, seed, **options) -> env`` on open ground; ``options`` are the
             env's reward settings a trainer's config may change (the humanoid's ``speed_weight``).
-        observation_dim / action_dim: the policy's input and output widths.
+        observation_dim, action_dim: the policy's input and output widths.
         weights: where the package ships the skill's policy body (the default export).
         defaults: the :class:`LocomotionConfig` fields this skill changes.
         env_options: the names ``make_env`` accepts as ``options``.
@@ -167,7 +167,7 @@ class LocomotionSkill:
         return make_skill_network(self.observation_dim, self.action_dim, hidden)
 
 
-#: The skills: OGBench's ant (its SAC budget) and OGBench's humanoid (issue 38's budget).
+#: The skills — OGBench's ant (its SAC budget) and OGBench's humanoid (issue 38's budget).
 SKILLS: dict[str, LocomotionSkill] = {
     "ant": LocomotionSkill(
         "ant", lambda n, seed: AntLocomotionEnv(batch_size=n, seed=seed), LOCOMOTION_OBSERVATION_DIM, 8, LOCOMOTION_WEIGHTS

@@ -234,7 +234,7 @@ class HumanoidMazeExpert(_PlannedSkillExpert):
 
     Args:
         env: the :class:`~torchrl_causal.envs.HumanoidMazeEnv` to solve.
-        lookahead / clearance / noise_std / seed: as :class:`AntMazeExpert`'s.
+        lookahead, clearance, noise_std, seed: as :class:`AntMazeExpert`'s.
         weights: path of the skill's state dict, or a shipped body's name
             (:data:`~torchrl_causal.experts.skills.HUMANOID_LOCOMOTION_BODIES`: ``"fast"``, the
             default file, or ``"steady"``); each maze's config names its best body.

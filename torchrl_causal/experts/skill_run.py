@@ -87,7 +87,7 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: Fields a continued run may change: the budget, and when and how much it evaluates and saves.
+#: Fields a continued run may change — the budget, and when and how much it evaluates and saves.
 BOOKKEEPING = frozenset({"total_steps", "eval_every", "eval_envs", "eval_steps", "checkpoint_minutes"})
 
 #: Where a skill run keeps the body of its best evaluation, in its run directory.
@@ -96,7 +96,7 @@ BEST_BODY = "best_body.pt"
 #: The few MB a run needs to continue on another machine (``--resume-from``).
 RESUME_STATE = "resume_state.pt"
 
-#: The command lines' default export, in the run directory: only a named ``--output`` replaces
+#: The command lines' default export, in the run directory; only a named ``--output`` replaces
 #: the package's weights (a short trial run must not).
 EXPORT = "export.pt"
 

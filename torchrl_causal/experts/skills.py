@@ -42,7 +42,7 @@ __all__ = [
 ASSETS = pathlib.Path(__file__).resolve().parents[1] / "envs" / "assets"
 #: The ant's trained locomotion policy body shipped with the package (a state dict).
 LOCOMOTION_WEIGHTS = ASSETS / "ant_locomotion.pt"
-#: Where the package ships the trained skill's policy body: the fast gait, (legs2)'s learner at
+#: Where the package ships the trained skill's policy body — the fast gait, (legs2)'s learner at
 #: 55.5M env steps, the only body that reaches HumanoidMaze-Large's goal within its horizon.
 HUMANOID_LOCOMOTION_WEIGHTS = ASSETS / "humanoid_locomotion.pt"
 #: The shipped skill bodies by name, each exported from a committed PPO state

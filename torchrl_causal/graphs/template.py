@@ -77,6 +77,7 @@ class TimeSliceTemplate:
     reward_parents: tuple[str, ...] = ()
     reward_bidirected: tuple[str, ...] = ()
     reward_slices: Literal["all", "last"] = "all"
+    #: the slice's variables in a topological order of the lag-0 edges, states first (derived).
     slice_order: tuple[str, ...] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:

@@ -31,11 +31,11 @@ __all__ = ["ALPHA_CLAMP", "BC_SCALES", "GOAL_VALUES", "ExpertFlaggedSACLoss"]
 #: The paper's clamp on the entropy coefficient, ``[exp(-log 1000), exp(-log 10)]``.
 ALPHA_CLAMP: tuple[float, float] = (1e-3, 1e-1)
 
-#: What a goal-terminated transition bootstraps from: ``None`` (zero, the paper's
+#: What a goal-terminated transition bootstraps from — ``None`` (zero, the paper's
 #: objective) or ``"expert"`` (the value of an expert state held for ever).
 GOAL_VALUES: tuple[str | None, ...] = (None, "expert")
 
-#: What the behaviour-cloning anchor's weight is multiplied by: ``"actor_loss"``
+#: What the behaviour-cloning anchor's weight is multiplied by — ``"actor_loss"``
 #: (``|loss_actor|``, about the batch's mean ``Q``, TD3+BC's normaliser) or
 #: ``"expert_value"`` (the critic's scale ``r_E / (1 - gamma)``, a constant).
 BC_SCALES: tuple[str, ...] = ("actor_loss", "expert_value")

@@ -168,7 +168,7 @@ class GAILDiscriminatorLoss(InKeysHook, GAILLoss):
         flags: tuple[torch.Tensor, torch.Tensor] | None = None,
     ) -> torch.Tensor:
         r""":math:`\frac1N \sum_i (\lVert \nabla_u \ell(\hat u_i) \rVert - 1)^2` on per-sample interpolates
-        (without :attr:`gp_lambda`), over the pairs whose ends are not absorbing."""
+        (without the ``gp_lambda`` weight), over the pairs whose ends are not absorbing."""
         weight = torch.rand((*expert_obs.shape[:-1], 1), dtype=expert_obs.dtype, device=expert_obs.device)
         obs = (weight * policy_obs + (1 - weight) * expert_obs).requires_grad_(True)
         act = (weight * policy_act + (1 - weight) * expert_act).requires_grad_(True)

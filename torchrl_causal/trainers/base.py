@@ -7,7 +7,7 @@ IQ-Learn), an offline epoch loop with early stopping (BC), rounds that interleav
 discriminator and PPO (GAIL), and resumable state that includes the env's episodes in
 flight and the best checkpoint so far. So each paradigm gets a small explicit loop on
 TorchRL's collectors, replay buffers, losses and loggers, and this base class holds the
-rest. Where the files go is :class:`~torchrl_causal.trainers.RunDirectory`'s business;
+rest. Where the files go is :class:`~torchrl_causal.experiment.run_directory.RunDirectory`'s business;
 how a policy is scored is the ``evaluate`` callable the trainer is given.
 
 Networks, losses and optimisers live on ``cfg.device`` (:attr:`Trainer.device`); envs
@@ -132,6 +132,7 @@ class Trainer(ABC):
         self.run = run
         self.window = window
         self.evaluate = evaluate
+        #: where networks, losses and optimisers live (``cfg.device`` resolved).
         self.device = resolve_device(cfg.device) if device is None else device
         #: units of training done so far (see :attr:`unit`).
         self.progress = 0

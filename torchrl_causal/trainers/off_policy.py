@@ -167,7 +167,7 @@ class OffPolicyILTrainer(Trainer):
             transform=operator.methodcaller("to", self.device),
         )
         self.log_every = self.cfg.log_every
-        # A run resumed without its replay buffer collects this many transitions before updating.
+        #: transitions a run resumed without its replay buffer collects before updating.
         self.refill_target = 0
         self.refilled_steps = 0
         self._reset_scalar_sums()

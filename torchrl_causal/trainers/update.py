@@ -146,6 +146,7 @@ class ActorCriticUpdate:
             raise InvalidValueError(f"a critic_scheduler needs cosine_updates >= 1, got {cosine_updates}")
         self.cosine_updates = cosine_updates
         self.critic_schedule = None if critic_scheduler is None else critic_scheduler(self.critic_optimizer, T_max=cosine_updates)
+        #: updates taken so far (the cosine schedule's position; saved with the state).
         self.updates = 0
         self.precision = resolve_precision(precision)
         self.device = loss.log_alpha.device
