@@ -68,6 +68,9 @@ __all__ = [
     "TRAIN_LOG",
     "EVAL_DIR",
     "LOG_DIR",
+    "VIDEO_DIR",
+    "VIDEO_INDEX",
+    "PERIODIC_VIDEOS",
     "TRAIN_CURVE",
     "SUCCESS_CURVE",
     "RUNTIME_KEYS",
@@ -104,6 +107,9 @@ CODE_FILE = "code.json"
 TRAIN_LOG = "train.log"
 EVAL_DIR = "eval"
 LOG_DIR = "logs"
+VIDEO_DIR = "videos"  # below LOG_DIR: evaluation videos (eval.video, evaluate video=N)
+VIDEO_INDEX = "videos.csv"  # below LOG_DIR: the CSV logger's record of the videos (step,tag,path rows)
+PERIODIC_VIDEOS = "periodic"  # below VIDEO_DIR: the periodic evaluations' videos (eval.video_periodic)
 CHECKPOINT_DIR = "checkpoints"
 REPLAY_DIR = "replay"
 LOCK_FILE = ".lock"
@@ -138,10 +144,11 @@ RUNTIME_KEYS: tuple[str, ...] = (
     "run_name",
     "run_dir",
     "demos.path",
-    # videos of the final evaluation: its records are the same with or without them
+    # videos of the evaluations: their records are the same with or without them
     "eval.video",
     "eval.video_format",
     "eval.video_every",
+    "eval.video_periodic",
 )
 
 #: ``{old dotted key: new dotted key}`` for every config key an earlier layout of the
@@ -515,6 +522,16 @@ class RunDirectory:
     @property
     def log_dir(self) -> Path:
         return self.path / LOG_DIR
+
+    @property
+    def video_dir(self) -> Path:
+        """Evaluation videos: ``<regime>/`` (the final evaluation), ``periodic/step_<n>/``,
+        ``evaluated/<regime>-<settings>/`` (``python -m torchrl_causal.evaluate video=N``)."""
+        return self.log_dir / VIDEO_DIR
+
+    def periodic_video_dir(self, step: int) -> Path:
+        """The videos of the periodic evaluation at ``step`` (``eval.video_periodic``)."""
+        return self.video_dir / PERIODIC_VIDEOS / f"step_{step}"
 
     @property
     def replay_dir(self) -> Path:
