@@ -81,7 +81,7 @@ def _truncate_scalar_logs(log_dir: Path, progress: int) -> None:
     """Drops CSV log rows written after ``progress`` by an interrupted attempt (the scalars
     and the CSV logger's record of the periodic evaluations' videos: each row's first field
     is its step)."""
-    for path in [*(log_dir / "scalars").rglob("*.csv"), *(log_dir / VIDEO_INDEX,)]:
+    for path in [*(log_dir / "scalars").rglob("*.csv"), log_dir / VIDEO_INDEX]:
         if not path.is_file():
             continue
         rows = [row for row in path.read_text().splitlines() if row and int(float(row.split(",")[0])) <= progress]
