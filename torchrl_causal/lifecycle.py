@@ -402,6 +402,15 @@ def evaluation_home(run_dir: str | Path, run_root: str | Path = "runs") -> Path:
     return Path(run_root) / EVALUATED_DIR / str(run.read_config().run_name)
 
 
+def _evaluation_settings(
+    stored: RunDirectory, episodes: int, num_envs: int | None, seed: int, confounding_strength: float | None
+) -> tuple[int, str]:
+    """The batch an evaluation of ``stored`` runs at once (``num_envs``, else the run's
+    ``eval.num_envs``, at most ``episodes``) and the :func:`record_settings` naming it."""
+    batch = min(int(stored.read_config().eval.num_envs if num_envs is None else num_envs), int(episodes))
+    return batch, record_settings(int(episodes), int(seed), batch, confounding_strength)
+
+
 def evaluation_videos(
     run_dir: str | Path,
     regime: str = "deploy",
@@ -415,9 +424,7 @@ def evaluation_videos(
     """Where :func:`evaluate_run` with these settings and ``video=N`` writes its videos:
     ``logs/videos/<regime>-<settings>/episode_<i>.<format>`` of :func:`evaluation_home`
     (below ``run_root`` for a shipped policy), named as its record is."""
-    stored = RunDirectory(run_dir)
-    num_envs = min(int(stored.read_config().eval.num_envs if num_envs is None else num_envs), int(episodes))
-    settings = record_settings(int(episodes), int(seed), num_envs, confounding_strength)
+    _, settings = _evaluation_settings(RunDirectory(run_dir), episodes, num_envs, seed, confounding_strength)
     return RunDirectory(evaluation_home(run_dir, run_root)).video_dir / f"{regime}-{settings}"
 
 
@@ -432,9 +439,7 @@ def evaluation_record(
     run_root: str | Path = "runs",
 ) -> Path:
     """Where :func:`evaluate_run` with these settings writes its record (see :func:`evaluation_home`)."""
-    stored = RunDirectory(run_dir)
-    num_envs = min(int(stored.read_config().eval.num_envs if num_envs is None else num_envs), int(episodes))
-    settings = record_settings(int(episodes), int(seed), num_envs, confounding_strength)
+    _, settings = _evaluation_settings(RunDirectory(run_dir), episodes, num_envs, seed, confounding_strength)
     return RunDirectory(evaluation_home(run_dir, run_root)).eval_path(regime, settings)
 
 
@@ -484,8 +489,7 @@ def evaluate_run(
         video_format = str(OmegaConf.select(run_eval, "video_format", default="mp4")) if video_format is None else video_format
         video_every = int(OmegaConf.select(run_eval, "video_every", default=1)) if video_every is None else video_every
         _check_evaluation_videos(video, video_format, video_every, reuse)
-    num_envs = min(int(stored.read_config().eval.num_envs if num_envs is None else num_envs), int(episodes))
-    settings = record_settings(int(episodes), int(seed), num_envs, confounding_strength)
+    num_envs, settings = _evaluation_settings(stored, episodes, num_envs, seed, confounding_strength)
     record = evaluation_record(
         run_dir, regime, episodes, num_envs=num_envs, seed=seed, confounding_strength=confounding_strength, run_root=run_root
     )
