@@ -25,26 +25,28 @@ from typing import cast
 
 import torch
 from hydra.utils import get_class
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 from tensordict.nn import TensorDictModuleBase
 
 from torchrl_causal.data.demonstrations import DatasetError
 from torchrl_causal.envs.base import REGIMES, validate_strength
-from torchrl_causal.errors import InvalidValueError
+from torchrl_causal.errors import InvalidValueError, MissingDependencyError
 from torchrl_causal.evaluation.evaluator import Evaluator
 from torchrl_causal.evaluation.metrics import EvaluationResult
-from torchrl_causal.evaluation.video import check_can_record
+from torchrl_causal.evaluation.video import VIDEO_FORMATS, check_can_record
 from torchrl_causal.experiment.builders import check_demonstrations, make_env, make_window
 from torchrl_causal.experiment.config import register_resolvers
 from torchrl_causal.experiment.device import resolve_device
 from torchrl_causal.experiment.interrupts import RunInterrupted, signals_raise
 from torchrl_causal.experiment.memory import check_run_fits
 from torchrl_causal.experiment.provenance import AttemptClock, attempt_identity
-from torchrl_causal.experiment.run_directory import CheckpointError, RunDirectory
+from torchrl_causal.experiment.run_directory import VIDEO_DIR, CheckpointError, RunDirectory
 from torchrl_causal.experiment.schema import ConfigValueError, validate_config
 from torchrl_causal.experiment.timing import timed
+from torchrl_causal.extras import missing_extra
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.trainers.base import Trainer
+from torchrl_causal.trainers.telemetry import open_run_logger
 
 __all__ = [
     "DEFAULT_THREADS",
@@ -55,6 +57,7 @@ __all__ = [
     "evaluate_run",
     "evaluation_home",
     "evaluation_record",
+    "evaluation_videos",
     "open_run",
     "record_settings",
     "run",
@@ -63,8 +66,6 @@ __all__ = [
 log = logging.getLogger("torchrl_causal")
 
 register_resolvers()
-
-VIDEO_DIR = "videos"  # <run_dir>/logs/videos/<regime>/episode_<i>.<format> (eval.video)
 
 
 @contextmanager
@@ -246,7 +247,7 @@ def _train_and_evaluate(
         trainer.fit()
         policy = trainer.best_policy()
     with timed("evaluation"):
-        results = evaluator.final(policy, video_dir=run_dir.log_dir / VIDEO_DIR if cfg.eval.video else None)
+        results = _final_evaluation(cfg, run_dir, evaluator, policy, progress=0 if trainer_class is None else trainer.progress)
     for regime, result in results.items():
         run_dir.write_json(run_dir.eval_path(regime), evaluator.record(result))
         log.info(
@@ -263,6 +264,20 @@ def _train_and_evaluate(
     if trainer_class is not None:
         trainer.finish()
     return results
+
+
+def _final_evaluation(
+    cfg: DictConfig, run_dir: RunDirectory, evaluator: Evaluator, policy: TensorDictModuleBase | None, progress: int
+) -> dict[str, EvaluationResult]:
+    """The final evaluation; with ``eval.video``, its videos in ``<run_dir>/logs/videos/<regime>/``
+    and in the run's logger (opened again: training closed its own), at the run's ``progress``."""
+    if not cfg.eval.video:
+        return evaluator.final(policy)
+    logger = open_run_logger(cfg, run_dir)
+    try:
+        return evaluator.final(policy, run_dir.video_dir, logger=logger, step=progress)
+    finally:
+        logger.close()  # flushes TensorBoard's file; W&B finishes the run
 
 
 DEFAULT_THREADS = 1
@@ -325,14 +340,35 @@ def _check_window(run: RunDirectory, cfg: DictConfig, window: AdjustmentWindow) 
         )
 
 
-def _check_evaluation(regime: str, episodes: int, num_envs: int | None, trajectories: int, confounding_strength: float | None) -> None:
+def _check_evaluation(
+    regime: str, episodes: int, num_envs: int | None, trajectories: int, confounding_strength: float | None, video: int = 0
+) -> None:
     if regime not in REGIMES:
         raise InvalidValueError(f"regime={regime!r} must be one of {', '.join(REGIMES)}")
-    for name, value, least in (("episodes", episodes, 1), ("num_envs", num_envs, 1), ("trajectories", trajectories, 0)):
+    for name, value, least in (
+        ("episodes", episodes, 1),
+        ("num_envs", num_envs, 1),
+        ("trajectories", trajectories, 0),
+        ("video", video, 0),
+    ):
         if value is not None and int(value) < least:
             raise InvalidValueError(f"{name}={value} is out of range: it must be >= {least}")
+    if int(video) > int(episodes):
+        raise InvalidValueError(f"video={video} asks for more videos than episodes={episodes}: one video per episode at most")
     if confounding_strength is not None:
         validate_strength(confounding_strength)
+
+
+def _check_evaluation_videos(video: int, video_format: str, video_every: int, reuse: bool) -> None:
+    """``evaluate_run``'s video settings, refused before anything is read or evaluated."""
+    if video_format not in VIDEO_FORMATS:
+        raise InvalidValueError(f"video_format={video_format!r} must be one of {', '.join(VIDEO_FORMATS)}")
+    if int(video_every) < 1:
+        raise InvalidValueError(f"video_every={video_every} is out of range: it must be >= 1")
+    if reuse:
+        raise InvalidValueError(f"video={video} records the episodes of a new evaluation, but reuse=true reads a stored one back: drop one")
+    if message := missing_extra(f"video={video} ({video_format})", "imageio", *(("av",) if video_format == "mp4" else ())):
+        raise MissingDependencyError(message)
 
 
 #: The package's own results tree (a git checkout's ``results/``): shipped runs and policies, never written by a command.
@@ -369,10 +405,27 @@ def evaluation_home(run_dir: str | Path, run_root: str | Path = "runs") -> Path:
 def _evaluation_settings(
     stored: RunDirectory, episodes: int, num_envs: int | None, seed: int, confounding_strength: float | None
 ) -> tuple[int, str]:
-    """The simulations an evaluation runs (the run's ``eval.num_envs`` by default, never more than
-    ``episodes``) and the name of its settings in its record's file name (:func:`record_settings`)."""
-    num_envs = min(int(stored.read_config().eval.num_envs if num_envs is None else num_envs), int(episodes))
-    return num_envs, record_settings(int(episodes), int(seed), num_envs, confounding_strength)
+    """The batch an evaluation of ``stored`` runs at once (``num_envs``, else the run's
+    ``eval.num_envs``, at most ``episodes``) and the :func:`record_settings` naming it."""
+    batch = min(int(stored.read_config().eval.num_envs if num_envs is None else num_envs), int(episodes))
+    return batch, record_settings(int(episodes), int(seed), batch, confounding_strength)
+
+
+def evaluation_videos(
+    run_dir: str | Path,
+    regime: str = "deploy",
+    episodes: int = 1000,
+    *,
+    num_envs: int | None = None,
+    seed: int = 30_000,
+    confounding_strength: float | None = None,
+    run_root: str | Path = "runs",
+) -> Path:
+    """Where :func:`evaluate_run` with these settings and ``video=N`` writes its videos:
+    ``logs/videos/<regime>-<settings>/episode_<i>.<format>`` of :func:`evaluation_home`
+    (below ``run_root`` for a shipped policy), named as its record is."""
+    _, settings = _evaluation_settings(RunDirectory(run_dir), episodes, num_envs, seed, confounding_strength)
+    return RunDirectory(evaluation_home(run_dir, run_root)).video_dir / f"{regime}-{settings}"
 
 
 def evaluation_record(
@@ -403,10 +456,18 @@ def evaluate_run(
     reuse: bool = False,
     device: str | None = None,
     run_root: str | Path = "runs",
+    video: int = 0,
+    video_format: str | None = None,
+    video_every: int | None = None,
 ) -> EvaluationResult:
     """Evaluates the selected policy of ``run_dir`` (see the module docstring); with
     ``reuse=True`` a stored record of the same settings is returned instead. The record is
     written to :func:`evaluation_record` (below ``run_root`` for a shipped policy).
+
+    ``video=N`` records the first ``N`` episodes to :func:`evaluation_videos`, as
+    ``video_format`` (default: the run's ``eval.video_format``, else mp4) with a frame every
+    ``video_every`` steps (default: the run's ``eval.video_every``, else 1); the result is
+    the same with or without them.
 
     Before evaluating, the run's config, window, weights and final records are checked
     against each other (and against the digests of ``checkpoints/best.json`` when the run
@@ -415,11 +476,19 @@ def evaluate_run(
     Raises:
         ValueError: naming ``device`` when it is given and this machine lacks it, or a
             value out of range (``regime``, ``episodes``, ``num_envs``, ``trajectories``,
-            ``confounding_strength``).
+            ``confounding_strength``, ``video`` above ``episodes``, ``video_format``,
+            ``video_every``), or ``video`` with ``reuse=True``.
+        MissingDependencyError: ``video`` without the ``[video]`` extra.
+        RenderingUnavailable: ``video`` of an env this machine cannot draw.
         CheckpointError: the run's files do not agree with each other.
     """
-    _check_evaluation(regime, episodes, num_envs, trajectories, confounding_strength)
+    _check_evaluation(regime, episodes, num_envs, trajectories, confounding_strength, video)
     stored = RunDirectory(run_dir)
+    if video:
+        run_eval = stored.read_config().eval
+        video_format = str(OmegaConf.select(run_eval, "video_format", default="mp4")) if video_format is None else video_format
+        video_every = int(OmegaConf.select(run_eval, "video_every", default=1)) if video_every is None else video_every
+        _check_evaluation_videos(video, video_format, video_every, reuse)
     num_envs, settings = _evaluation_settings(stored, episodes, num_envs, seed, confounding_strength)
     record = evaluation_record(
         run_dir, regime, episodes, num_envs=num_envs, seed=seed, confounding_strength=confounding_strength, run_root=run_root
@@ -429,7 +498,16 @@ def evaluate_run(
             if found.is_file():
                 return EvaluationResult.from_dict(stored.read_json(found))
     run, evaluator, policy = open_run(run_dir, confounding_strength=confounding_strength, device=device)
-    result = evaluator.evaluate(policy, regime, int(episodes), int(seed), trajectories=int(trajectories), num_envs=num_envs)
+    videos = None
+    if video:
+        _check_videos(evaluator.cfg)  # before evaluating: an env this machine cannot draw is refused now
+        folder = evaluation_videos(
+            run_dir, regime, episodes, num_envs=num_envs, seed=seed, confounding_strength=confounding_strength, run_root=run_root
+        )
+        videos = evaluator.videos(folder, count=int(video), fmt=video_format, every=video_every)
+    result = evaluator.evaluate(
+        policy, regime, int(episodes), int(seed), trajectories=int(trajectories), num_envs=num_envs, observer=videos
+    )
     if save:
         run.write_json(record, evaluator.record(result))
     return result

@@ -14,6 +14,11 @@ only read: its record goes to ``<run_root>/evaluated/...`` (``run_root=runs`` by
 the command prints where.
 ``device=<cpu|cuda|...>`` picks where the policy runs; by default the run's own device
 when this machine has it, else the CPU (a run trained on a GPU evaluates anywhere).
+``video=<n>`` records the first ``n`` episodes as videos (the ``[video]`` extra), to
+``logs/videos/<regime>-<settings>/episode_<i>.mp4`` beside where the record goes (so below
+``run_root`` for a shipped policy); ``video_format=gif`` and ``video_every=<k>`` (a frame
+every ``k`` steps) default to the run's ``eval.video_format`` and ``eval.video_every``. The
+record is the same with or without videos.
 ``threads=<n>`` (default 1, as training's ``threads``) sets ``torch.set_num_threads``. Torch's
 own default, a thread per core, oversubscribes a small machine that runs anything else: on
 2 cores with two evaluations at once, 1000 RoverMaze episodes of a C-IQ-Learn policy took
@@ -28,9 +33,11 @@ from collections.abc import Sequence
 import torch
 
 from torchrl_causal.cli.arguments import Option, argv_or_sys, one_line_errors, parse_arguments
+from torchrl_causal.errors import MissingDependencyError, RenderingUnavailable
 from torchrl_causal.evaluation.metrics import EvaluationResult
+from torchrl_causal.evaluation.video import VIDEO_FORMATS
 from torchrl_causal.experiment.run_directory import CheckpointError
-from torchrl_causal.lifecycle import DEFAULT_THREADS, REGIMES, evaluate_run, evaluation_record
+from torchrl_causal.lifecycle import DEFAULT_THREADS, REGIMES, evaluate_run, evaluation_record, evaluation_videos
 
 __all__ = ["OPTIONS", "main"]
 
@@ -47,6 +54,9 @@ OPTIONS: dict[str, Option] = {
     "device": Option(str, None, placeholder="<the run's, else cpu>", help="where the policy runs"),
     "threads": Option(int, DEFAULT_THREADS, ge=1, help="torch threads"),
     "run_root": Option(str, "runs", help="a run not ours to write into gets its record in <run_root>/evaluated/"),
+    "video": Option(int, 0, ge=0, help="record the first N episodes as videos in logs/videos/<regime>-<settings>/ beside the record"),
+    "video_format": Option(str, None, choices=VIDEO_FORMATS, placeholder="<the run's eval.video_format>", help="mp4 or gif"),
+    "video_every": Option(int, None, ge=1, placeholder="<the run's eval.video_every>", help="a video frame every this many steps"),
 }
 EXAMPLE = "python -m torchrl_causal.evaluate run_dir=runs/rovermaze_u/h1000-cs1.0-k10/c_bc/seed0 regime=deploy episodes=200"
 
@@ -61,17 +71,11 @@ def _pm(mean: float, spread: float, digits: int = 1) -> str:
 def main(argv: Sequence[str] | None = None) -> EvaluationResult:
     args = parse_arguments("evaluate", argv_or_sys(argv), OPTIONS, about=__doc__, example=EXAMPLE)
     torch.set_num_threads(args.pop("threads"))
-    with one_line_errors(CheckpointError):
+    with one_line_errors(CheckpointError, MissingDependencyError, RenderingUnavailable):
         result = evaluate_run(**args)
-        record = evaluation_record(
-            args["run_dir"],
-            args["regime"],
-            args["episodes"],
-            num_envs=args["num_envs"],
-            seed=args["seed"],
-            confounding_strength=args["confounding_strength"],
-            run_root=args["run_root"],
-        )
+        settings = {key: args[key] for key in ("num_envs", "seed", "confounding_strength", "run_root")}
+        record = evaluation_record(args["run_dir"], args["regime"], args["episodes"], **settings)
+        videos = evaluation_videos(args["run_dir"], args["regime"], args["episodes"], **settings) if args["video"] else None
     print(
         f"{args['run_dir']} [{result.regime}] episodes {result.n_episodes}: success {100 * result.success_rate:.1f}% "
         f"± {100 * result.success_se:.1f}, E[Y] {result.return_mean:.1f} ± {result.return_std:.1f}, "
@@ -79,6 +83,8 @@ def main(argv: Sequence[str] | None = None) -> EvaluationResult:
     )
     if args["save"] and record.is_file():
         print(f"record: {record}")
+    if videos is not None:
+        print(f"videos: {videos} ({min(args['video'], result.n_episodes)} episodes)")
     return result
 
 

@@ -19,13 +19,15 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs import EnvBase
+from torchrl.record.loggers import Logger
 
 from torchrl_causal.envs.base import REGIMES
 from torchrl_causal.evaluation.metrics import EpisodeObserver, EvaluationResult, Policy, evaluate_policy
 from torchrl_causal.evaluation.video import EpisodeVideos
+from torchrl_causal.evaluation.video_log import VideoLog
 from torchrl_causal.experiment.builders import make_env, make_expert, make_imitator_env, make_policy
 from torchrl_causal.experiment.device import for_cpu_env, resolve_device
-from torchrl_causal.experiment.run_directory import CONFIG_FILE, WINDOW_FILE, CheckpointError, RunDirectory
+from torchrl_causal.experiment.run_directory import CONFIG_FILE, PERIODIC_VIDEOS, WINDOW_FILE, CheckpointError, RunDirectory
 from torchrl_causal.experiment.schema import EVAL_VIDEO_SIZE, VideoFormat
 from torchrl_causal.graphs.window import AdjustmentWindow
 
@@ -153,16 +155,30 @@ class Evaluator:
                 module.train(was_training)
             env.close()
 
-    def periodic(self, policy: Policy) -> EvaluationResult:
+    def periodic(self, policy: Policy, *, video_dir: Path | None = None, logger: Logger | None = None, step: int = 0) -> EvaluationResult:
         """The train-regime evaluation that selects the best checkpoint (``cfg.eval.episodes``
-        episodes, the same ones every time)."""
-        return self.evaluate(policy, "train", self.cfg.eval.episodes, PERIODIC_EVAL_SEED + self.cfg.seed)
+        episodes, the same ones every time); with ``video_dir`` (``eval.video_periodic``),
+        its first ``cfg.eval.video`` episodes recorded there and, with ``logger``, logged as
+        ``video/periodic/episode_<i>`` at ``step`` (the result is the same with or without them)."""
+        observer = None
+        if video_dir is not None:
+            observer = self.videos(video_dir, VideoLog(logger, f"video/{PERIODIC_VIDEOS}", step) if logger is not None else None)
+        return self.evaluate(policy, "train", self.cfg.eval.episodes, PERIODIC_EVAL_SEED + self.cfg.seed, observer=observer)
 
-    def final(self, policy: Policy | None, video_dir: Path | None = None) -> dict[str, EvaluationResult]:
+    def final(
+        self, policy: Policy | None, video_dir: Path | None = None, *, logger: Logger | None = None, step: int = 0
+    ) -> dict[str, EvaluationResult]:
         """Both regimes on ``cfg.eval.final_episodes`` episodes, ``cfg.eval.trajectories``
         deploy-regime positions kept for the figure; with ``video_dir``, the first
         ``cfg.eval.video`` episodes of each regime recorded to ``<video_dir>/<regime>/``
-        (the results are the same with or without them)."""
+        and, with ``logger``, logged there as ``video/final/<regime>/episode_<i>`` at
+        ``step`` (the results are the same with or without them)."""
+
+        def videos(regime: str) -> EpisodeVideos | None:
+            if video_dir is None:
+                return None
+            return self.videos(video_dir / regime, VideoLog(logger, f"video/final/{regime}", step) if logger is not None else None)
+
         return {
             regime: self.evaluate(
                 policy,
@@ -170,24 +186,34 @@ class Evaluator:
                 self.cfg.eval.final_episodes,
                 FINAL_EVAL_SEED + 1000 * offset + self.cfg.seed,
                 trajectories=self.cfg.eval.trajectories,
-                observer=self.videos(video_dir / regime) if video_dir is not None else None,
+                observer=videos(regime),
             )
             for offset, regime in enumerate(REGIMES)
         }
 
-    def videos(self, folder: Path) -> EpisodeVideos | None:
-        """The recorder of ``cfg.eval.video`` episodes into ``folder`` (``None`` when the
-        config asks for none)."""
-        count = int(OmegaConf.select(self.cfg, "eval.video", default=0) or 0)
+    def videos(
+        self,
+        folder: Path,
+        log: VideoLog | None = None,
+        *,
+        count: int | None = None,
+        fmt: str | None = None,
+        every: int | None = None,
+    ) -> EpisodeVideos | None:
+        """The recorder of ``count`` episodes into ``folder``, each also handed to ``log``
+        (``None`` when there are none to record). ``count``, ``fmt`` and ``every`` default
+        to the config's ``eval.video``, ``eval.video_format`` and ``eval.video_every``."""
+        count = int(OmegaConf.select(self.cfg, "eval.video", default=0) or 0) if count is None else count
         if not count:
             return None
         return EpisodeVideos(
             folder,
             count,
-            fmt=VideoFormat(OmegaConf.select(self.cfg, "eval.video_format", default="mp4")).value,
-            every=int(OmegaConf.select(self.cfg, "eval.video_every", default=1)),
+            fmt=VideoFormat(OmegaConf.select(self.cfg, "eval.video_format", default="mp4") if fmt is None else fmt).value,
+            every=int(OmegaConf.select(self.cfg, "eval.video_every", default=1)) if every is None else every,
             width=EVAL_VIDEO_SIZE,
             height=EVAL_VIDEO_SIZE,
+            log=log,
         )
 
     def record(self, result: EvaluationResult) -> dict[str, Any]:

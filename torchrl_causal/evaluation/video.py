@@ -2,9 +2,10 @@
 
 The frames go through TorchRL's :class:`~torchrl.record.VideoRecorder`, which hands the
 episode to a logger's ``log_video``; :class:`VideoFile` is that logger for one file: an
-MP4 (H.264, written with PyAV) or a GIF (Pillow, through imageio). TorchRL's own
-``CSVLogger(video_format="mp4")`` needs torchcodec and a system FFmpeg; PyAV bundles its
-FFmpeg, so a ``pip install`` is enough.
+MP4 (H.264, written with PyAV) or a GIF (Pillow, through imageio), then, given a
+:class:`~torchrl_causal.evaluation.video_log.VideoLog`, handed on to the run's own logger.
+TorchRL's own ``CSVLogger(video_format="mp4")`` needs torchcodec and a system FFmpeg; PyAV
+bundles its FFmpeg, so a ``pip install`` is enough.
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ from torchrl.record import VideoRecorder
 from torchrl_causal.errors import InvalidValueError
 from torchrl_causal.evaluation.metrics import Policy
 from torchrl_causal.evaluation.rendering import EpisodeOutcome, renderable_scene, rendered_episode
-from torchrl_causal.extras import require_extra
+from torchrl_causal.evaluation.video_encoding import encode_gif, frames_of, write_mp4
+from torchrl_causal.evaluation.video_log import VideoLog, log_video_file
 
 __all__ = [
     "VIDEO_FORMATS",
@@ -39,11 +41,14 @@ VIDEO_FORMATS = ("mp4", "gif")
 
 
 class VideoFile:
-    """A logger whose ``log_video`` writes the video to ``path`` (format from its suffix).
+    """A logger whose ``log_video`` writes the video to ``path`` (format from its suffix)
+    and, with ``log``, hands it on to the run's logger
+    (:func:`~torchrl_causal.evaluation.video_log.log_video_file`).
 
     Args:
         path: ``<name>.mp4`` or ``<name>.gif``.
         fps: frames per second.
+        log: the run's logger, the tag prefix and step (``None``: the file only).
 
     Examples:
         >>> import tempfile
@@ -55,52 +60,35 @@ class VideoFile:
         [0, 60, 120, 180]
     """
 
-    def __init__(self, path: str | Path, fps: int = 30) -> None:
+    def __init__(self, path: str | Path, fps: int = 30, log: VideoLog | None = None) -> None:
         self.path = Path(path)
         if self.path.suffix.lstrip(".") not in VIDEO_FORMATS:
             raise InvalidValueError(f"video file {self.path} must end in one of {['.' + f for f in VIDEO_FORMATS]}")
         if fps < 1:
             raise InvalidValueError(f"fps must be >= 1, got {fps}")
         self.fps = fps
+        self.log = log
 
     def log_video(self, name: str, video: torch.Tensor, step: int | None = None, *, fps: float | None = None, **kwargs: object) -> None:
         """Writes ``video`` (``[1, T, C, H, W]`` or ``[T, C, H, W]`` uint8, as
         :class:`~torchrl.record.VideoRecorder` passes it) at ``fps`` (default: this file's);
-        ``name``, ``step`` and other options of other loggers are unused."""
-        require_extra("writing videos", "imageio")
-        import imageio.v3 as iio
-
-        frames = video.reshape(-1, *video.shape[-3:]).permute(0, 2, 3, 1).contiguous().numpy()
+        ``name``, ``step`` and other options of other loggers are unused (the run's logger
+        gets the tag and step of ``log``)."""
+        frames = frames_of(video)
         fps = int(self.fps if fps is None else fps)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if self.path.suffix == ".gif":
-            # Pillow stores a frame identical to the one before it as a longer duration of
-            # that one: the GIF plays the same, with fewer frames to decode. GIF durations
-            # are whole centiseconds, so an fps that divides 100 plays at exactly fps.
-            iio.imwrite(self.path, frames, extension=".gif", duration=1000 / fps, loop=0)
-            return
-        _write_mp4(self.path, frames, fps)
+            self.path.write_bytes(encode_gif(frames, fps))
+        else:
+            write_mp4(self.path, frames, fps)
+        if self.log is not None:
+            log_video_file(self.log, self.path, video.reshape(1, -1, *video.shape[-3:]), fps)
 
 
-def _write_mp4(path: Path, frames: np.ndarray, fps: int, crf: int = 17) -> None:
-    """H.264 in yuv420p (what every player reads; it needs even sides); ``crf`` 17 is
-    visually lossless."""
-    av = require_extra("writing MP4 videos", "av")
-    height, width = frames.shape[1:3]
-    if height % 2 or width % 2:
-        raise InvalidValueError(f"an MP4 needs an even width and height, got {width}x{height}")
-    with av.open(str(path), "w") as container:
-        stream = container.add_stream("libx264", rate=fps, options={"crf": str(crf)})
-        stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
-        for frame in frames:
-            container.mux(stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")))
-        container.mux(stream.encode())  # flush the encoder
-
-
-def _recorder(path: Path, fps: int) -> VideoRecorder:
+def _recorder(path: Path, fps: int, log: VideoLog | None = None) -> VideoRecorder:
     """TorchRL's recorder of one episode's frames (``[H, W, 3]`` uint8 under ``"pixels"``),
-    whose ``dump`` writes them to ``path``."""
-    return VideoRecorder(logger=VideoFile(path, fps=fps), tag=path.stem, in_keys=["pixels"], skip=1, make_grid=False)
+    whose ``dump`` writes them to ``path`` (and hands them to ``log``'s logger)."""
+    return VideoRecorder(logger=VideoFile(path, fps=fps, log=log), tag=path.stem, in_keys=["pixels"], skip=1, make_grid=False)
 
 
 def _add_frame(recorder: VideoRecorder, frame: np.ndarray) -> None:
@@ -222,6 +210,8 @@ class EpisodeVideos:
         count: how many episodes (the first ones) to record.
         fmt: ``"mp4"`` or ``"gif"``.
         every, fps, width, height, camera: as :func:`record_video` takes them.
+        log: also hand each video to this run logger, tagged ``<log.prefix>/episode_<i>``
+            at ``log.step`` (:mod:`~torchrl_causal.evaluation.video_log`).
 
     Examples:
         >>> import tempfile
@@ -246,13 +236,14 @@ class EpisodeVideos:
         width: int = 240,
         height: int = 240,
         camera: str | None = None,
+        log: VideoLog | None = None,
     ) -> None:
         if count < 1 or every < 1:
             raise InvalidValueError(f"EpisodeVideos needs count >= 1 and every >= 1, got {count}, {every}")
         if fmt not in VIDEO_FORMATS:
             raise InvalidValueError(f"video format {fmt!r} is not one of {list(VIDEO_FORMATS)}")
         self.folder, self.count, self.fmt, self.every, self.fps = Path(folder), count, fmt, every, fps
-        self.size, self.camera = (width, height), camera
+        self.size, self.camera, self.log = (width, height), camera, log
         self.paths: list[Path] = []
         self.frames: list[int] = []
         # batch row -> (index of its video in paths and frames, its episode's recorder)
@@ -273,7 +264,7 @@ class EpisodeVideos:
         for row, episode in enumerate(episodes):
             if episode < self.count:
                 path = self.folder / f"episode_{episode}.{self.fmt}"
-                self._recorders[row] = (len(self.paths), _recorder(path, self.fps))
+                self._recorders[row] = (len(self.paths), _recorder(path, self.fps, self.log))
                 self.paths.append(path)
                 self.frames.append(0)
         if self._recorders:

@@ -157,9 +157,13 @@ def _imitator_transition_bytes(cfg: DictConfig, window: AdjustmentWindow) -> int
 
 
 def _video_bytes(cfg: DictConfig) -> dict[str, int]:
-    """The frames of the final evaluation's videos, held until each episode ends (twice
-    while one is written): the episodes of one round, every ``eval.video_every``-th step."""
-    count = min(int(OmegaConf.select(cfg, "eval.video", default=0) or 0), cfg.eval.num_envs, cfg.eval.final_episodes)
+    """The frames of the evaluations' videos, held until each episode ends (twice while one
+    is written): the episodes of one round of the final evaluation (or of a periodic one,
+    with ``eval.video_periodic``), every ``eval.video_every``-th step."""
+    episodes = cfg.eval.final_episodes
+    if OmegaConf.select(cfg, "eval.video_periodic", default=False):
+        episodes = max(episodes, cfg.eval.episodes)
+    count = min(int(OmegaConf.select(cfg, "eval.video", default=0) or 0), cfg.eval.num_envs, episodes)
     if not count:
         return {}
     frames = cfg.env.horizon // int(OmegaConf.select(cfg, "eval.video_every", default=1)) + 2

@@ -68,6 +68,9 @@ __all__ = [
     "TRAIN_LOG",
     "EVAL_DIR",
     "LOG_DIR",
+    "VIDEO_DIR",
+    "VIDEO_INDEX",
+    "PERIODIC_VIDEOS",
     "TRAIN_CURVE",
     "SUCCESS_CURVE",
     "RUNTIME_KEYS",
@@ -105,6 +108,9 @@ CODE_FILE = "code.json"
 TRAIN_LOG = "train.log"
 EVAL_DIR = "eval"
 LOG_DIR = "logs"
+VIDEO_DIR = "videos"  # below LOG_DIR: evaluation videos (eval.video, evaluate video=N)
+VIDEO_INDEX = "videos.csv"  # below LOG_DIR: the CSV logger's record of the videos (step,tag,path rows)
+PERIODIC_VIDEOS = "periodic"  # below VIDEO_DIR: the periodic evaluations' videos (eval.video_periodic)
 CHECKPOINT_DIR = "checkpoints"
 REPLAY_DIR = "replay"
 LOCK_FILE = ".lock"
@@ -139,10 +145,11 @@ RUNTIME_KEYS: tuple[str, ...] = (
     "run_name",
     "run_dir",
     "demos.path",
-    # videos of the final evaluation: its records are the same with or without them
+    # videos of the evaluations: their records are the same with or without them
     "eval.video",
     "eval.video_format",
     "eval.video_every",
+    "eval.video_periodic",
 )
 
 #: ``{old dotted key: new dotted key}`` for every config key an earlier layout of the
@@ -546,6 +553,16 @@ class RunDirectory:
     train_curve_file = EntryPath(LOG_DIR, "scalars", f"{TRAIN_CURVE}.csv")
     last_checkpoint = EntryPath(CHECKPOINT_DIR, "last.pt")
     best_checkpoint = EntryPath(CHECKPOINT_DIR, "best.pt")
+
+    @property
+    def video_dir(self) -> Path:
+        """Evaluation videos: ``<regime>/`` (the final evaluation), ``periodic/step_<n>/``,
+        ``evaluated/<regime>-<settings>/`` (``python -m torchrl_causal.evaluate video=N``)."""
+        return self.log_dir / VIDEO_DIR
+
+    def periodic_video_dir(self, step: int) -> Path:
+        """The videos of the periodic evaluation at ``step`` (``eval.video_periodic``)."""
+        return self.video_dir / PERIODIC_VIDEOS / f"step_{step}"
 
     def success_curve_file(self, regime: str) -> Path:
         """The periodic evaluations' success rates in ``regime`` (a CSVLogger scalar file)."""

@@ -353,6 +353,9 @@ class EvalConfig:
     video: int = at_least(0, default=0)
     video_format: VideoFormat = VideoFormat.mp4
     video_every: int = at_least(1, default=1)  # a frame every this many env steps (and the last)
+    # Also the first `video` episodes of every periodic (train-regime) evaluation, to
+    # <run_dir>/logs/videos/periodic/step_<progress>/; each video also goes to the logger.
+    video_periodic: bool = False
 
 
 @dataclass
@@ -708,6 +711,15 @@ def _check_target_entropy(cfg: DictConfig) -> None:
         raise ConfigValueError(f"config value algo.loss.target_entropy={value!r} must be 'auto' or a number")
 
 
+def _check_videos(cfg: DictConfig) -> None:
+    """Periodic evaluations' videos (``eval.video_periodic``) say how many episodes in ``eval.video``."""
+    if OmegaConf.select(cfg, "eval.video_periodic", default=False) and not cfg.eval.video:
+        raise ConfigValueError(
+            "config value eval.video_periodic=true records the first eval.video episodes of each periodic evaluation, "
+            "but eval.video=0: set eval.video=<episodes> too"
+        )
+
+
 def _check_extras(cfg: DictConfig) -> None:
     """An optional package the config needs (a logger's, Minari's) is installed."""
     from torchrl_causal.data.sources import source_problem
@@ -785,4 +797,5 @@ def validate_config(cfg: DictConfig) -> None:
     _check_target_entropy(cfg)
     _check_expert(cfg)
     _check_shift(cfg)
+    _check_videos(cfg)
     _check_extras(cfg)

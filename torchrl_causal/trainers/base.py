@@ -27,7 +27,6 @@ from pathlib import Path
 from typing import Any, ClassVar, Protocol
 
 import torch
-from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict
 from tensordict.nn import TensorDictModuleBase
@@ -39,11 +38,11 @@ from torchrl_causal.experiment.builders import expert_transitions, load_or_colle
 from torchrl_causal.experiment.device import resolve_device, resolve_precision
 from torchrl_causal.experiment.interrupts import RunInterrupted, deferred_signals
 from torchrl_causal.experiment.provenance import attempt_identity, identity_changes
-from torchrl_causal.experiment.run_directory import TRAIN_CURVE, ConfigMismatchError, RunDirectory, atomic_write_text
+from torchrl_causal.experiment.run_directory import TRAIN_CURVE, VIDEO_INDEX, ConfigMismatchError, RunDirectory, atomic_write_text
 from torchrl_causal.experiment.timing import timed
 from torchrl_causal.graphs.window import AdjustmentWindow
 from torchrl_causal.progress import progress
-from torchrl_causal.trainers.telemetry import SpeedMeter, log_config
+from torchrl_causal.trainers.telemetry import SpeedMeter, log_config, open_run_logger
 
 __all__ = ["Score", "Trainer", "selection_key"]
 
@@ -79,8 +78,12 @@ def selection_key(success_rate: float, return_mean: float, by_success: bool) -> 
 
 
 def _truncate_scalar_logs(log_dir: Path, progress: int) -> None:
-    """Drops CSV log rows written after ``progress`` by an interrupted attempt."""
-    for path in (log_dir / "scalars").rglob("*.csv"):
+    """Drops CSV log rows written after ``progress`` by an interrupted attempt (the scalars
+    and the CSV logger's record of the periodic evaluations' videos: each row's first field
+    is its step)."""
+    for path in [*(log_dir / "scalars").rglob("*.csv"), log_dir / VIDEO_INDEX]:
+        if not path.is_file():
+            continue
         rows = [row for row in path.read_text().splitlines() if row and int(float(row.split(",")[0])) <= progress]
         atomic_write_text(path, "".join(f"{row}\n" for row in rows))
 
@@ -108,7 +111,10 @@ class Trainer(ABC):
         cfg: the run's composed config.
         run: its directory.
         window: the adjustment window the policy conditions on.
-        evaluate: scores a policy for best-checkpoint selection.
+        evaluate: scores a policy for best-checkpoint selection (``evaluate(policy)``); with
+            ``eval.video_periodic`` it is called ``evaluate(policy, video_dir=, logger=, step=)``
+            to record videos of the evaluation, as
+            :meth:`~torchrl_causal.evaluation.evaluator.Evaluator.periodic` does.
         device: where networks, losses and replay batches live: the run's ``cfg.device``
             as its caller resolved it (:func:`~torchrl_causal.experiment.device.resolve_device`),
             resolved here when not given.
@@ -124,7 +130,7 @@ class Trainer(ABC):
         cfg: DictConfig,
         run: RunDirectory,
         window: AdjustmentWindow,
-        evaluate: Callable[[TensorDictModuleBase], Score],
+        evaluate: Callable[..., Score],
         *,
         device: torch.device | None = None,
     ) -> None:
@@ -288,7 +294,7 @@ class Trainer(ABC):
     def periodic_evaluation(self) -> Score:
         """Scores the policy; keeps the best one; checkpoints the run."""
         with timed("evaluation"):
-            result = self.evaluate(self.policy)
+            result = self.evaluate(self.policy, **self._periodic_videos())
         speed = {} if self.speed is None else self.speed.read()
         self._log({TRAIN_CURVE: result.return_mean, "eval/train_success": result.success_rate, **speed}, self.progress)
         self.last_evaluated = self.progress
@@ -302,6 +308,15 @@ class Trainer(ABC):
             "[%d %s] train-regime return %.1f, success %.0f%%", self.progress, self.unit, result.return_mean, 100 * result.success_rate
         )
         return result
+
+    def _periodic_videos(self) -> dict[str, Any]:
+        """What :meth:`periodic_evaluation` passes ``evaluate`` beside the policy: with
+        ``eval.video_periodic``, the folder of this evaluation's videos, the logger they also
+        go to and the step (see :meth:`~torchrl_causal.evaluation.evaluator.Evaluator.periodic`);
+        else nothing, so any one-argument ``evaluate`` serves."""
+        if not OmegaConf.select(self.cfg, "eval.video_periodic", default=False):
+            return {}
+        return {"video_dir": self.run.periodic_video_dir(self.progress), "logger": self.logger, "step": self.progress}
 
     @property
     def selects_on_evaluation(self) -> bool:
@@ -341,7 +356,7 @@ class Trainer(ABC):
             resumed = self._resume()
         # The wall time of the attempts before this one: status.json holds it as of the checkpoint resumed from.
         self.speed = SpeedMeter(float(self.run.read_status().get("wall_time_s") or 0.0) if resumed else 0.0)
-        self.logger = instantiate(self.cfg.logger)(log_dir=str(self.run.path))
+        self.logger = open_run_logger(self.cfg, self.run)
         if resumed:
             log.info("resumed %s at %d %s", self.run.path, self.progress, self.unit)
         else:

@@ -1,5 +1,8 @@
 """What a run tells its logger beside its losses: the resolved config, once, and its speed.
 
+:func:`open_run_logger` opens the run's TorchRL logger (``cfg.logger``) in its directory:
+for training, and again for the final evaluation's videos.
+
 :func:`log_config` hands the run's resolved config to TorchRL's ``Logger.log_hparams``,
 flattened to ``"algo.actor.hidden": 256``-style keys with scalar values (what TensorBoard's
 hparams accept): the CSV logger writes it to ``logs/texts/hparams0.txt`` (``key: value``
@@ -39,10 +42,13 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from torchrl.record.loggers import Logger
 
-__all__ = ["SPEED_PREFIX", "SpeedMeter", "flat_config", "log_config"]
+from torchrl_causal.experiment.run_directory import RunDirectory
+
+__all__ = ["SPEED_PREFIX", "SpeedMeter", "flat_config", "log_config", "open_run_logger"]
 
 #: The prefix of the speed scalars (measurements that differ from run to run).
 SPEED_PREFIX = "speed/"
@@ -64,6 +70,13 @@ def flat_config(cfg: DictConfig) -> dict[str, int | float | str | bool]:
 
     visit("", OmegaConf.to_container(cfg, resolve=True, enum_to_str=True))
     return dict(sorted(flat.items()))
+
+
+def open_run_logger(cfg: DictConfig, run: RunDirectory) -> Logger:
+    """The run's logger, ``cfg.logger`` with the run directory as its ``log_dir``: the CSV
+    logger's and TensorBoard's files go to ``<run_dir>/logs``, W&B's offline runs to
+    ``<run_dir>/wandb`` (a logger opened again logs to the same W&B run: its id is the run's)."""
+    return instantiate(cfg.logger)(log_dir=str(run.path))
 
 
 def log_config(logger: Logger, cfg: DictConfig) -> None:
