@@ -14,6 +14,10 @@ only read: its record goes to ``<run_root>/evaluated/...`` (``run_root=runs`` by
 the command prints where.
 ``device=<cpu|cuda|...>`` picks where the policy runs; by default the run's own device
 when this machine has it, else the CPU (a run trained on a GPU evaluates anywhere).
+The expert row walks the skill body its ``config.yaml`` records (``env.expert_body``: the
+weights file and its digest), refused when that file is gone or holds another body; a run
+made before runs recorded it is refused unless ``expert_weights=<name or file>`` says which
+body it walked (an expert without a weights file, RoverMaze's, needs none).
 ``threads=<n>`` (default 1, as training's ``threads``) sets ``torch.set_num_threads``. Torch's
 own default, a thread per core, oversubscribes a small machine that runs anything else: on
 2 cores with two evaluations at once, 1000 RoverMaze episodes of a C-IQ-Learn policy took
@@ -47,6 +51,12 @@ OPTIONS: dict[str, Option] = {
     "device": Option(str, None, placeholder="<the run's, else cpu>", help="where the policy runs"),
     "threads": Option(int, DEFAULT_THREADS, ge=1, help="torch threads"),
     "run_root": Option(str, "runs", help="a run not ours to write into gets its record in <run_root>/evaluated/"),
+    "expert_weights": Option(
+        str,
+        None,
+        placeholder="<the body the run records>",
+        help="the expert row's skill body (a shipped body's name, e.g. steady, or a weights file), for a run that records none",
+    ),
 }
 EXAMPLE = "python -m torchrl_causal.evaluate run_dir=runs/rovermaze_u/h1000-cs1.0-k10/c_bc/seed0 regime=deploy episodes=200"
 
