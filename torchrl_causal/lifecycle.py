@@ -355,7 +355,7 @@ def settle_expert_body(run: RunDirectory, cfg: DictConfig, expert_weights: str |
         return
     raise ExpertBodyError(
         f"{run.config_file} records no expert body ({EXPERT_BODY_KEY}: the run predates the record), and "
-        f"{cfg.env.expert._target_} walks a weights file whose default has changed since: nothing was evaluated; "
+        f"{cfg.env.expert._target_} walks a weights file whose default today need not be the run's: nothing was evaluated; "
         "say which body the run walked with expert_weights=<a shipped body's name, e.g. steady, or a weights file>, "
         f"or add {EXPERT_BODY_KEY} (weights, sha256) to that config.yaml"
     )
