@@ -37,10 +37,11 @@ from torchrl_causal.evaluation.video import VIDEO_FORMATS, check_can_record
 from torchrl_causal.experiment.builders import check_demonstrations, make_env, make_window
 from torchrl_causal.experiment.config import register_resolvers
 from torchrl_causal.experiment.device import resolve_device
+from torchrl_causal.experiment.expert_body import ExpertBodyError, expert_weights_file, recorded_body, resolve_expert_body
 from torchrl_causal.experiment.interrupts import RunInterrupted, signals_raise
 from torchrl_causal.experiment.memory import check_run_fits
 from torchrl_causal.experiment.provenance import AttemptClock, attempt_identity
-from torchrl_causal.experiment.run_directory import VIDEO_DIR, CheckpointError, RunDirectory
+from torchrl_causal.experiment.run_directory import EXPERT_BODY_KEY, VIDEO_DIR, CheckpointError, RunDirectory
 from torchrl_causal.experiment.schema import ConfigValueError, validate_config
 from torchrl_causal.experiment.timing import timed
 from torchrl_causal.extras import missing_extra
@@ -61,6 +62,7 @@ __all__ = [
     "open_run",
     "record_settings",
     "run",
+    "settle_expert_body",
 ]
 
 log = logging.getLogger("torchrl_causal")
@@ -127,6 +129,9 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
     if cfg.eval.video:
         _check_videos(cfg)  # before training: a machine that cannot draw the env refuses now, not hours later
     total = trainer_class.budget(cfg) if trainer_class else 0
+    # The skill body the expert walks, recorded in config.yaml: what re-evaluating the expert row
+    # rebuilds, whatever body is the default then (a missing weights file is refused here, before anything is written).
+    body = resolve_expert_body(cfg.env.expert)
     run_dir = RunDirectory(cfg.run_dir)
     created = _first_missing(run_dir.path)  # what a failure before any checkpoint removes
     if trainer_class is not None and created is not None:
@@ -140,7 +145,7 @@ def run(cfg: DictConfig) -> dict[str, EvaluationResult]:
         if not cfg.resume:
             run_dir.discard()
             created = created or run_dir.path
-        return _claim_and_run(cfg, run_dir, trainer_class, window, total, created, clock)
+        return _claim_and_run(cfg, run_dir, trainer_class, window, total, created, clock, body.to_record())
 
 
 def _check_videos(cfg: DictConfig) -> None:
@@ -200,9 +205,12 @@ def _claim_and_run(
     total: int,
     created: Path | None,
     clock: AttemptClock,
+    body: dict[str, str | None],
 ) -> dict[str, EvaluationResult]:
     extendable = trainer_class is not None and trainer_class.extendable_budget(cfg)
-    run_dir.claim(cfg, ignored=(trainer_class.budget_key,) if trainer_class is not None and extendable else ())
+    run_dir.claim(
+        cfg, ignored=(trainer_class.budget_key,) if trainer_class is not None and extendable else (), recorded={EXPERT_BODY_KEY: body}
+    )
     status = run_dir.read_status()
     if status.get("status") == "complete" and status.get("total") == total:
         log.info("%s is complete: its stored evaluations are returned", run_dir.path)
@@ -295,17 +303,24 @@ def record_settings(episodes: int, seed: int, num_envs: int, confounding_strengt
 
 
 def open_run(
-    run_dir: str | Path, *, confounding_strength: float | None = None, device: str | None = None
+    run_dir: str | Path,
+    *,
+    confounding_strength: float | None = None,
+    device: str | None = None,
+    expert_weights: str | Path | None = None,
 ) -> tuple[RunDirectory, Evaluator, TensorDictModuleBase | None]:
     """The run directory, an :class:`~torchrl_causal.evaluation.evaluator.Evaluator` of its config and its selected policy
     (``checkpoints/best.pt``; ``None`` for the expert row, which the evaluator rebuilds
-    from each env).
+    from each env with the skill body its config records: :func:`settle_expert_body`).
 
     Raises:
         ValueError: naming ``device`` when it is given and this machine lacks it.
+        ExpertBodyError: the expert row records no body and ``expert_weights`` names none, or names another.
     """
     run = RunDirectory(run_dir)
     cfg = run.read_config()
+    if not cfg.algo.trainer:  # the expert row: the evaluator rebuilds its expert
+        settle_expert_body(run, cfg, expert_weights)
     if confounding_strength is not None:
         cfg.env.confounding_strength = float(confounding_strength)
     if device is not None:
@@ -322,6 +337,43 @@ def open_run(
     evaluator = Evaluator(cfg, window, progress=True, device=resolved)
     evaluator.check_records(run)
     return run, evaluator, evaluator.load_best_policy(run) if window is not None else None
+
+
+def settle_expert_body(run: RunDirectory, cfg: DictConfig, expert_weights: str | Path | None = None) -> None:
+    """Makes ``cfg`` (``run``'s stored config, in place) record the skill body its expert row
+    walked, which :func:`~torchrl_causal.experiment.builders.make_expert` then rebuilds and checks.
+
+    A run that records its body keeps it (``expert_weights``, when given, must name the same
+    body). A run made before runs recorded their body (no ``env.expert_body``) is settled only
+    where that is certain: an expert that walks no weights file (RoverMaze's) has no body to
+    choose; any other is refused unless ``expert_weights`` names the body it walked (a shipped
+    body's name, e.g. ``steady``, or a weights file): today's default need not be that run's.
+
+    Raises:
+        ExpertBodyError: in one line, naming the field and the override.
+    """
+    recorded = recorded_body(cfg)
+    if expert_weights is not None:
+        given = resolve_expert_body(cfg.env.expert, expert_weights)
+        if recorded is not None and recorded.sha256 != given.sha256:
+            raise ExpertBodyError(
+                f"expert_weights={expert_weights} is another body (sha256 {given.sha256}) than the one {run.config_file} "
+                f"records ({EXPERT_BODY_KEY}: {recorded.weights}, sha256 {recorded.sha256}): nothing was evaluated; "
+                "leave expert_weights out"
+            )
+        OmegaConf.update(cfg, EXPERT_BODY_KEY, given.to_record(), merge=False, force_add=True)
+        return
+    if recorded is not None:
+        return
+    if expert_weights_file(cfg.env.expert) is None:  # a scripted expert: no body to choose, none to record
+        OmegaConf.update(cfg, EXPERT_BODY_KEY, {"weights": None, "sha256": None}, merge=False, force_add=True)
+        return
+    raise ExpertBodyError(
+        f"{run.config_file} records no expert body ({EXPERT_BODY_KEY}: the run predates the record), and "
+        f"{cfg.env.expert._target_} walks a weights file whose default today need not be the run's: nothing was evaluated; "
+        "say which body the run walked with expert_weights=<a shipped body's name, e.g. steady, or a weights file>, "
+        f"or add {EXPERT_BODY_KEY} (weights, sha256) to that config.yaml"
+    )
 
 
 def _check_window(run: RunDirectory, cfg: DictConfig, window: AdjustmentWindow) -> None:
@@ -459,6 +511,7 @@ def evaluate_run(
     video: int = 0,
     video_format: str | None = None,
     video_every: int | None = None,
+    expert_weights: str | Path | None = None,
 ) -> EvaluationResult:
     """Evaluates the selected policy of ``run_dir`` (see the module docstring); with
     ``reuse=True`` a stored record of the same settings is returned instead. The record is
@@ -471,7 +524,8 @@ def evaluate_run(
 
     Before evaluating, the run's config, window, weights and final records are checked
     against each other (and against the digests of ``checkpoints/best.json`` when the run
-    recorded them): an edited file is refused, not evaluated under the run's name.
+    recorded them): an edited file is refused, not evaluated under the run's name. The expert
+    row walks the skill body its config records (``expert_weights``: :func:`settle_expert_body`).
 
     Raises:
         ValueError: naming ``device`` when it is given and this machine lacks it, or a
@@ -481,6 +535,7 @@ def evaluate_run(
         MissingDependencyError: ``video`` without the ``[video]`` extra.
         RenderingUnavailable: ``video`` of an env this machine cannot draw.
         CheckpointError: the run's files do not agree with each other.
+        ExpertBodyError: the expert row's skill body is not the one it recorded, or it records none.
     """
     _check_evaluation(regime, episodes, num_envs, trajectories, confounding_strength, video)
     stored = RunDirectory(run_dir)
@@ -497,7 +552,7 @@ def evaluate_run(
         for found in (stored.eval_path(regime, settings), record):  # the run's own record first (an archive's)
             if found.is_file():
                 return EvaluationResult.from_dict(stored.read_json(found))
-    run, evaluator, policy = open_run(run_dir, confounding_strength=confounding_strength, device=device)
+    run, evaluator, policy = open_run(run_dir, confounding_strength=confounding_strength, device=device, expert_weights=expert_weights)
     videos = None
     if video:
         _check_videos(evaluator.cfg)  # before evaluating: an env this machine cannot draw is refused now

@@ -19,6 +19,10 @@ when this machine has it, else the CPU (a run trained on a GPU evaluates anywher
 ``run_root`` for a shipped policy); ``video_format=gif`` and ``video_every=<k>`` (a frame
 every ``k`` steps) default to the run's ``eval.video_format`` and ``eval.video_every``. The
 record is the same with or without videos.
+The expert row walks the skill body its ``config.yaml`` records (``env.expert_body``: the
+weights file and its digest), refused when that file is gone or holds another body; a run
+made before runs recorded it is refused unless ``expert_weights=<name or file>`` says which
+body it walked (an expert without a weights file, RoverMaze's, needs none).
 ``threads=<n>`` (default 1, as training's ``threads``) sets ``torch.set_num_threads``. Torch's
 own default, a thread per core, oversubscribes a small machine that runs anything else: on
 2 cores with two evaluations at once, 1000 RoverMaze episodes of a C-IQ-Learn policy took
@@ -57,6 +61,12 @@ OPTIONS: dict[str, Option] = {
     "video": Option(int, 0, ge=0, help="record the first N episodes as videos in logs/videos/<regime>-<settings>/ beside the record"),
     "video_format": Option(str, None, choices=VIDEO_FORMATS, placeholder="<the run's eval.video_format>", help="mp4 or gif"),
     "video_every": Option(int, None, ge=1, placeholder="<the run's eval.video_every>", help="a video frame every this many steps"),
+    "expert_weights": Option(
+        str,
+        None,
+        placeholder="<the body the run records>",
+        help="the expert row's skill body (a shipped body's name, e.g. steady, or a weights file), for a run that records none",
+    ),
 }
 EXAMPLE = "python -m torchrl_causal.evaluate run_dir=runs/rovermaze_u/h1000-cs1.0-k10/c_bc/seed0 regime=deploy episodes=200"
 

@@ -21,6 +21,7 @@ from tensordict.nn import TensorDictModuleBase
 from torchrl.data import Binary
 from torchrl.envs import EnvBase, TransformedEnv
 
+from torchrl_causal.experiment.expert_body import recorded_body
 from torchrl_causal.experiment.schema import ConfigValueError, WindowMode
 from torchrl_causal.graphs.template import TimeSliceTemplate
 from torchrl_causal.graphs.window import AdjustmentWindow
@@ -143,8 +144,18 @@ def make_policy(cfg: DictConfig, env: EnvBase) -> TensorDictModuleBase:
 
 
 def make_expert(cfg: DictConfig, env: EnvBase) -> Callable[[TensorDictBase], TensorDictBase]:
-    """The env's expert policy (``cfg.env.expert``), which reads the latent variables."""
-    return instantiate(cfg.env.expert, env)
+    """The env's expert policy (``cfg.env.expert``), which reads the latent variables.
+
+    A run's stored config records the skill body its expert walked (``env.expert_body``,
+    :mod:`~torchrl_causal.experiment.expert_body`): that file is walked, not the one
+    ``env.expert.weights`` (or the class's default) names today, and it is refused when it is
+    missing or holds another body.
+    """
+    body = recorded_body(cfg)
+    weights = None if body is None else body.verified_file()
+    if weights is None:
+        return instantiate(cfg.env.expert, env)
+    return instantiate(cfg.env.expert, env, weights=str(weights))
 
 
 def load_or_collect_demonstrations(cfg: DictConfig) -> TensorDictBase:

@@ -74,6 +74,8 @@ __all__ = [
     "TRAIN_CURVE",
     "SUCCESS_CURVE",
     "RUNTIME_KEYS",
+    "EXPERT_BODY_KEY",
+    "RECORDED_KEYS",
     "RUN_ENTRIES",
     "CheckpointError",
     "CheckpointWriteError",
@@ -151,6 +153,15 @@ RUNTIME_KEYS: tuple[str, ...] = (
     "eval.video_every",
     "eval.video_periodic",
 )
+
+#: Where a run's ``config.yaml`` records the weights file its expert walks and that file's digest
+#: (:mod:`~torchrl_causal.experiment.expert_body`).
+EXPERT_BODY_KEY = "env.expert_body"
+#: Config keys a run writes of what it resolved from its config, never given by the user (the
+#: expert's body). :meth:`RunDirectory.claim` compares them on their own (a run started before
+#: they existed records none) and :func:`config_digest` leaves them out, so that a run resumed
+#: across their introduction keeps its selected policy's identity; their own digests guard them.
+RECORDED_KEYS: tuple[str, ...] = (EXPERT_BODY_KEY,)
 
 #: ``{old dotted key: new dotted key}`` for every config key an earlier layout of the
 #: configs wrote under another name. :meth:`RunDirectory.read_config` renames them, so runs
@@ -288,7 +299,7 @@ def config_digest(config: Mapping[str, Any], ignored: Iterable[str] = ()) -> str
     def off(value: Any) -> bool:
         return value is None or value is False or (isinstance(value, (list, dict)) and not value)
 
-    return _digest({key: value for key, value in _identity(config, (*RUNTIME_KEYS, *ignored)).items() if not off(value)})
+    return _digest({key: value for key, value in _identity(config, (*RUNTIME_KEYS, *RECORDED_KEYS, *ignored)).items() if not off(value)})
 
 
 def policy_digest(policy_state: Mapping[str, Any]) -> str:
@@ -610,27 +621,46 @@ class RunDirectory:
             raise RunFileError(f"{self.config_file} is corrupted (not a mapping): restore it or train the run again")
         return migrate_config(config)
 
-    def claim(self, cfg: DictConfig, ignored: Iterable[str] = ()) -> None:
+    def claim(self, cfg: DictConfig, ignored: Iterable[str] = (), recorded: Mapping[str, Any] | None = None) -> None:
         """Makes this directory the run of ``cfg``, refusing another run's directory.
 
-        Compares ``cfg`` (resolved) with ``config.yaml``, :data:`RUNTIME_KEYS` and
-        ``ignored`` aside, and writes ``config.yaml`` only when they agree or none exists.
+        Compares ``cfg`` (resolved) with ``config.yaml``, :data:`RUNTIME_KEYS`, :data:`RECORDED_KEYS`
+        and ``ignored`` aside, and writes ``config.yaml`` only when they agree or none exists.
+        ``recorded`` (``{dotted key of RECORDED_KEYS: value}``) is what the run resolved from
+        ``cfg`` (its expert's body): a stored config that records another value is refused; one
+        that records none gets it, unless the run is complete (a finished run was made with
+        files of its day, which today's need not be: it stays without the record).
 
         Raises:
             ConfigMismatchError: naming every key whose value differs.
         """
         # The containers of DictConfigs are dicts keyed by the config's (string) keys.
         resolved = cast(dict[str, Any], OmegaConf.to_container(cfg, resolve=True, enum_to_str=True))
+        recorded = dict(recorded or {})
+        if unknown := sorted(set(recorded) - set(RECORDED_KEYS)):
+            raise InvalidValueError(f"claim(recorded=...) names {unknown[0]!r}, which is not one of RECORDED_KEYS {RECORDED_KEYS}")
         if self.config_file.is_file():
-            stored = cast(dict[str, Any], OmegaConf.to_container(self.read_config()))
-            changes = changed_keys(stored, resolved, (*RUNTIME_KEYS, *ignored))
+            stored_config = self.read_config()
+            stored = cast(dict[str, Any], OmegaConf.to_container(stored_config))
+            changes = changed_keys(stored, resolved, (*RUNTIME_KEYS, *RECORDED_KEYS, *ignored))
+            complete = self.read_status().get("status") == "complete"
+            for key, value in list(recorded.items()):
+                before = OmegaConf.select(stored_config, key)
+                before = OmegaConf.to_container(before) if isinstance(before, DictConfig) else before
+                if before is None and complete:
+                    del recorded[key]
+                elif before is not None and before != value:
+                    changes[key] = (before, value)
             if changes:
                 listed = "; ".join(f"{key}: {old!r} -> {new!r}" for key, (old, new) in changes.items())
                 raise ConfigMismatchError(
                     f"{self.path} holds a run of another config ({listed}). Nothing was changed: choose another "
                     "run_root or run_name, or pass resume=false to discard that run and start this one there."
                 )
-        atomic_write_text(self.config_file, OmegaConf.to_yaml(resolved))
+        config = OmegaConf.create(resolved)
+        for key, value in recorded.items():
+            OmegaConf.update(config, key, value, merge=False, force_add=True)
+        atomic_write_text(self.config_file, OmegaConf.to_yaml(config))
 
     def _ours(self, entry: Path) -> bool:
         return entry.name in RUN_ENTRIES or bool(_TEMPORARY.match(entry.name))

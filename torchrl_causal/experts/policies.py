@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import pathlib
+from typing import ClassVar
 
 import torch
 from tensordict import TensorDictBase
@@ -19,6 +20,7 @@ from torchrl_causal.experts.planner import MazePlanner
 from torchrl_causal.experts.skills import (
     HUMANOID_LOCOMOTION_WEIGHTS,
     LOCOMOTION_WEIGHTS,
+    humanoid_body_file,
     load_humanoid_locomotion_network,
     load_locomotion_network,
 )
@@ -127,8 +129,18 @@ class _PlannedSkillExpert(TensorDictModuleBase):
     sight within ``lookahead`` cells) gives a waypoint; the unit vector from the torso to it is
     the commanded direction; the skill network turns the agent's variables and that direction
     into torques (its deterministic action, ``tanh`` of the Gaussian mean). Subclasses name the
-    variables and how the skill reads them (:meth:`_skill_observation`).
+    variables and how the skill reads them (:meth:`_skill_observation`), and the body it walks
+    unless told another (:attr:`default_weights`).
     """
+
+    #: The weights file of the skill body the expert walks when its ``weights`` is not given.
+    default_weights: ClassVar[pathlib.Path]
+
+    @classmethod
+    def weights_file(cls, weights: str | pathlib.Path | None = None) -> pathlib.Path:
+        """The file of the skill body that ``weights`` names (``None``: :attr:`default_weights`):
+        what a run records of its expert (:mod:`torchrl_causal.experiment.expert_body`)."""
+        return pathlib.Path(cls.default_weights if weights is None else weights)
 
     def __init__(
         self,
@@ -180,7 +192,7 @@ class AntMazeExpert(_PlannedSkillExpert):
         clearance: half-size (m) of the box a line of sight must pass.
         noise_std: DART-style Gaussian action noise (0: the deterministic expert).
         seed: seed of the noise generator.
-        weights: path of the locomotion state dict.
+        weights: path of the locomotion state dict (``None``: the shipped body, :attr:`default_weights`).
 
     Examples:
         >>> env = AntMazeEnv("medium", batch_size=2, seed=0)
@@ -191,6 +203,7 @@ class AntMazeExpert(_PlannedSkillExpert):
 
     in_keys = ["P", ("latent", "O"), "A", "L", "T", "J"]
     out_keys = ["action"]
+    default_weights = LOCOMOTION_WEIGHTS
 
     def __init__(
         self,
@@ -200,12 +213,18 @@ class AntMazeExpert(_PlannedSkillExpert):
         clearance: float = 1.0,
         noise_std: float = 0.0,
         seed: int | None = None,
-        weights: str | pathlib.Path = LOCOMOTION_WEIGHTS,
+        weights: str | pathlib.Path | None = None,
     ) -> None:
         if not isinstance(env, AntMazeEnv):
             raise InvalidTypeError(f"AntMazeExpert drives an AntMazeEnv, got {type(env).__name__}")
         super().__init__(
-            env, load_locomotion_network(weights), action_dim=8, lookahead=lookahead, clearance=clearance, noise_std=noise_std, seed=seed
+            env,
+            load_locomotion_network(self.weights_file(weights)),
+            action_dim=8,
+            lookahead=lookahead,
+            clearance=clearance,
+            noise_std=noise_std,
+            seed=seed,
         )
 
     def _skill_observation(self, tensordict: TensorDictBase, direction: torch.Tensor) -> torch.Tensor:
@@ -238,10 +257,20 @@ class HumanoidMazeExpert(_PlannedSkillExpert):
         weights: path of the skill's state dict, or a shipped body's name
             (:data:`~torchrl_causal.experts.skills.HUMANOID_LOCOMOTION_BODIES`: ``"fast"``, the
             default file, or ``"steady"``); each maze's config names its best body.
+
+    Examples:
+        >>> HumanoidMazeExpert.weights_file("steady").name, HumanoidMazeExpert.weights_file().name
+        ('humanoid_locomotion_steady.pt', 'humanoid_locomotion.pt')
     """
 
     in_keys = ["P", "A", "H", "E", "V", ("latent", "C"), "J"]
     out_keys = ["action"]
+    default_weights = HUMANOID_LOCOMOTION_WEIGHTS
+
+    @classmethod
+    def weights_file(cls, weights: str | pathlib.Path | None = None) -> pathlib.Path:
+        """The file of the body ``weights`` names: a shipped body's name, a path, or ``None`` (the default file)."""
+        return humanoid_body_file(cls.default_weights if weights is None else weights)
 
     def __init__(
         self,
@@ -251,13 +280,14 @@ class HumanoidMazeExpert(_PlannedSkillExpert):
         clearance: float = 0.45,
         noise_std: float = 0.0,
         seed: int | None = None,
-        weights: str | pathlib.Path = HUMANOID_LOCOMOTION_WEIGHTS,
+        weights: str | pathlib.Path | None = None,
     ) -> None:
         if not isinstance(env, HumanoidMazeEnv):
             raise InvalidTypeError(f"HumanoidMazeExpert drives a HumanoidMazeEnv, got {type(env).__name__}")
         super().__init__(
             env,
-            load_humanoid_locomotion_network(weights),
+            # by name where it has one: the loader's message for a missing file names that body's PPO state
+            load_humanoid_locomotion_network(self.default_weights if weights is None else weights),
             action_dim=21,
             lookahead=lookahead,
             clearance=clearance,

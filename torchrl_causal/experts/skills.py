@@ -30,6 +30,7 @@ __all__ = [
     "HUMANOID_LOCOMOTION_WEIGHTS",
     "LOCOMOTION_WEIGHTS",
     "CommandFrame",
+    "humanoid_body_file",
     "humanoid_skill_network",
     "load_humanoid_locomotion_network",
     "load_locomotion_network",
@@ -196,6 +197,18 @@ def _stored_command_frame(path: pathlib.Path) -> float | None:
     return None if angle is None else float(angle)
 
 
+def humanoid_body_file(body: str | pathlib.Path = HUMANOID_LOCOMOTION_WEIGHTS) -> pathlib.Path:
+    """The weights file of a humanoid skill body: a shipped body's name
+    (:data:`HUMANOID_LOCOMOTION_BODIES`) or a path, as it is.
+
+    Examples:
+        >>> humanoid_body_file("steady").name, humanoid_body_file("my/skill.pt").as_posix()
+        ('humanoid_locomotion_steady.pt', 'my/skill.pt')
+    """
+    named = HUMANOID_LOCOMOTION_BODIES.get(str(body))
+    return pathlib.Path(body) if named is None else named[0]
+
+
 def load_humanoid_locomotion_network(path: str | pathlib.Path = HUMANOID_LOCOMOTION_WEIGHTS) -> torch.nn.Module:
     """The humanoid skill's 2 x 256 policy body (69 -> 2 x 21) with trained weights, in eval mode
     (behind a :class:`CommandFrame` when the weights were trained with one).
@@ -212,10 +225,8 @@ def load_humanoid_locomotion_network(path: str | pathlib.Path = HUMANOID_LOCOMOT
         >>> round(float(body[0].command_frame), 4)  # the angle its command is turned to (-pi/2)
         -1.5708
     """
-    source = "results/humanoid_locomotion/ppo_legs2/resume_state.pt"
-    if str(path) in HUMANOID_LOCOMOTION_BODIES:
-        path, source = HUMANOID_LOCOMOTION_BODIES[str(path)]
-    path = pathlib.Path(path)
+    _, source = HUMANOID_LOCOMOTION_BODIES.get(str(path), (None, "results/humanoid_locomotion/ppo_legs2/resume_state.pt"))
+    path = humanoid_body_file(path)
     return load_skill_network(
         path,
         humanoid_skill_network(command_frame=_stored_command_frame(path)),
