@@ -357,6 +357,19 @@ def _single_threaded_children() -> Iterator[None]:
                 os.environ[name] = value
 
 
+#: Seconds ``shutdown()`` waits for the workers to exit before it kills them (TorchRL's default,
+#: 10, is short on a loaded machine; the workers ignore SIGTERM, so TorchRL's terminate step is moot).
+WORKER_SHUTDOWN_SECONDS = 60.0
+
+
+class _PatientMultiSyncCollector(MultiSyncCollector):
+    """A :class:`~torchrl.collectors.MultiSyncCollector` whose ``shutdown()`` waits
+    :data:`WORKER_SHUTDOWN_SECONDS` for its workers unless told otherwise."""
+
+    def shutdown(self, timeout: float | None = None, close_env: bool = True, raise_on_error: bool = True) -> None:
+        super().shutdown(WORKER_SHUTDOWN_SECONDS if timeout is None else timeout, close_env, raise_on_error)
+
+
 def parallel_skill_collector(
     make_env: Callable[[int], EnvBase], seeds: Sequence[WorkerSeeds], actor: nn.Module, frames_per_batch: int, steps: int
 ) -> MultiSyncCollector:
@@ -375,7 +388,7 @@ def parallel_skill_collector(
         raise InvalidValueError(f"need >= 2 workers that divide frames_per_batch ({frames_per_batch}), got {workers}")
     threads = torch.get_num_threads()  # TorchRL would give this process (cores - workers) threads
     with _single_threaded_children():
-        return MultiSyncCollector(
+        return _PatientMultiSyncCollector(
             [SeededEnvMaker(make_env, pair) for pair in seeds],
             actor,
             frames_per_batch=frames_per_batch,
