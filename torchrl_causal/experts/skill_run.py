@@ -364,10 +364,19 @@ WORKER_SHUTDOWN_SECONDS = 60.0
 
 class _PatientMultiSyncCollector(MultiSyncCollector):
     """A :class:`~torchrl.collectors.MultiSyncCollector` whose ``shutdown()`` waits
-    :data:`WORKER_SHUTDOWN_SECONDS` for its workers unless told otherwise."""
+    :data:`WORKER_SHUTDOWN_SECONDS` for its workers unless told otherwise, and leaves this
+    process the torch thread count it had when the collector was built (TorchRL's sets it to
+    its own guess: 1 after an ``OMP_NUM_THREADS=1`` start)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        self._owner_threads = torch.get_num_threads()
+        super().__init__(*args, **kwargs)
 
     def shutdown(self, timeout: float | None = None, close_env: bool = True, raise_on_error: bool = True) -> None:
-        super().shutdown(WORKER_SHUTDOWN_SECONDS if timeout is None else timeout, close_env, raise_on_error)
+        try:
+            super().shutdown(WORKER_SHUTDOWN_SECONDS if timeout is None else timeout, close_env, raise_on_error)
+        finally:
+            torch.set_num_threads(self._owner_threads)
 
 
 def parallel_skill_collector(
