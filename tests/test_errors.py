@@ -38,6 +38,7 @@ ALLOWED: dict[tuple[str, str], str] = {
     # A requested stop (a signal, a deadline) carried to the top, documented outside the tree.
     ("experiment/interrupts.py", "RunInterrupted"): "requested stop",
     ("trainers/base.py", "self._interrupted"): "requested stop (the RunInterrupted a signal left)",
+    ("experts/locomotion_ppo.py", "RunInterrupted"): "requested stop (after the batch in flight and a save)",
 }
 
 

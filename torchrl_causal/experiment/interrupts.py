@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from types import FrameType
 from typing import Any, TypeGuard
 
-__all__ = ["RunInterrupted", "DeferredSignals", "deferred_signals", "run_in_processes", "signals_raise"]
+__all__ = ["RunInterrupted", "DeferredSignals", "deferred_signals", "ignored_signals", "run_in_processes", "signals_raise"]
 
 log = logging.getLogger(__name__)
 
@@ -175,9 +175,18 @@ def _worker(function: Callable[[Any], int], task: Any, stop: Any) -> None:
 
 
 @contextmanager
-def _ignored_signals() -> Iterator[None]:
-    """SIGINT and SIGTERM ignored: a process spawned now inherits that through its start-up
-    (the interpreter keeps an ignored SIGINT ignored), so it cannot die in its imports."""
+def ignored_signals() -> Iterator[None]:
+    """SIGINT, SIGTERM and SIGUSR2 ignored: a process spawned now inherits that through its start-up
+    (the interpreter keeps an ignored SIGINT ignored), so it cannot die in its imports, and a
+    terminal's Ctrl-C reaches only its parent, which decides when it stops.
+
+    Examples:
+        >>> with ignored_signals():
+        ...     signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+        True
+        >>> signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+        False
+    """
     previous = {number: signal.signal(number, signal.SIG_IGN) for number in _SIGNALS}
     try:
         yield
@@ -220,7 +229,7 @@ def run_in_processes(function: Callable[[Any], int], tasks: Sequence[Any], worke
         while True:
             while not stop.is_set() and len(running) < workers and (index := next(queued, None)) is not None:
                 process = context.Process(target=_worker, args=(function, tasks[index], stop))
-                with _ignored_signals():
+                with ignored_signals():
                     process.start()
                 running[index] = process
             if not running:

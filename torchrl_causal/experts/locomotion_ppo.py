@@ -15,19 +15,23 @@ exported body has the normaliser folded into its first layer
 (:func:`fold_observation_normalisation`): the shipped weights load into the same network as
 SAC's, and :class:`~torchrl_causal.experts.HumanoidMazeExpert` uses them unchanged.
 
-TorchRL parts: :class:`~torchrl.collectors.Collector` over the batched env,
+TorchRL parts: :class:`~torchrl.collectors.Collector` over the batched env (or, with
+``collector_workers`` > 1, :class:`~torchrl.collectors.MultiSyncCollector` over that many
+processes, each with its share of the simulations),
 :class:`~torchrl.objectives.value.GAE`, :class:`~torchrl.objectives.ClipPPOLoss`. Rewards are
 scaled by ``reward_scale`` for the critic (the stand reward is up to 2.5 per step). Every
 ``checkpoint_minutes`` and every evaluation ``<run_dir>/resume_state.pt`` is written (a few MB);
 the same command resumes from it, on this machine or (``--resume-from``) another::
 
     python -m torchrl_causal.experts.locomotion_ppo --skill humanoid --run-dir runs/humanoid_ppo
+    python -m torchrl_causal.experts.locomotion_ppo --skill humanoid --run-dir runs/humanoid_ppo --collector-workers 2
 """
 
 from __future__ import annotations
 
 import argparse
 import copy
+import functools
 import json
 import logging
 import math
@@ -39,25 +43,30 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictSequential
 from torch import nn
-from torchrl.envs import TransformedEnv, UnaryTransform
+from torchrl.collectors import BaseCollector
+from torchrl.envs import EnvBase, TransformedEnv, UnaryTransform
 from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOperator
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
 from torchrl_causal.command_line import count, non_negative_number, positive_number
+from torchrl_causal.envs.open_ground import DirectionalLocomotionEnv
 from torchrl_causal.errors import InvalidTypeError, InvalidValueError
+from torchrl_causal.experiment.interrupts import RunInterrupted, deferred_signals
 from torchrl_causal.experiment.run_directory import atomic_save
 from torchrl_causal.experts.locomotion import SKILLS, LocomotionSkill, evaluate_locomotion
 from torchrl_causal.experts.skill_run import (
     SkillLoop,
     SkillRunDirectory,
     check_same_config,
+    parallel_skill_collector,
     read_skill_state,
     require_positive,
     run_skill_command,
     skill_collector,
     skill_command,
     skill_parser,
+    worker_seeds,
 )
 
 __all__ = [
@@ -100,6 +109,10 @@ class PPOLocomotionConfig:
     ``direction_period`` (``None``: the env's, 100-200 steps) is the inclusive range of steps between
     the training env's command redraws; the evaluation keeps the skill's task, so a run that walks
     longer legs (as a maze's corridors ask) scores on the same commands as one that does not.
+    ``collector_workers`` processes collect each batch (1: this process, the runs on record),
+    each on ``num_envs / collector_workers`` simulations with seeds of its own
+    (:func:`~torchrl_causal.experts.skill_run.worker_seeds`): the batch and the update are the
+    same size and shape. A curriculum's widened commands reach them by a new set of workers.
     """
 
     total_steps: int = 30_000_000
@@ -130,9 +143,14 @@ class PPOLocomotionConfig:
     eval_steps: int = 400
     checkpoint_minutes: float = 10.0
     seed: int = 0
+    collector_workers: int = 1
 
     def __post_init__(self) -> None:
-        require_positive(self, ("total_steps", "num_envs", "rollout_steps", "epochs", "minibatch_size", "hidden"))
+        require_positive(self, ("total_steps", "num_envs", "rollout_steps", "epochs", "minibatch_size", "hidden", "collector_workers"))
+        if self.num_envs % self.collector_workers:
+            raise InvalidValueError(
+                f"collector_workers ({self.collector_workers}) must divide num_envs ({self.num_envs}): each worker steps an equal share"
+            )
         require_positive(self, ("eval_every", "eval_envs", "eval_steps"))
         if self.minibatch_size > self.frames_per_batch:
             raise InvalidValueError(
@@ -429,7 +447,8 @@ def train_locomotion_ppo(
         if config.widen_gate is not None and spread is not None and spread < math.pi and score >= config.widen_gate:
             counters["command_spread"] = min(math.pi, spread + config.widen_step)
             counters["best_score"] = -math.inf  # the wider spread selects its own best
-            env.command_spread = counters["command_spread"]  # a widened curriculum, from the next batch on
+            if env is not None:  # a widened curriculum, from the next batch on (workers: from the next workers on)
+                env.command_spread = counters["command_spread"]
             log.info(
                 "[%s ppo] upright speed %.3f >= %.3f: commands widen to %.4f rad",
                 skill.name,
@@ -439,43 +458,94 @@ def train_locomotion_ppo(
             )
         return {**result, **({} if spread is None else {"command_spread": spread})}
 
-    remaining = config.total_steps - counters["steps"]
-    if remaining > 0:
-        # A resumed run draws fresh episodes from a new seed (the simulations are not saved).
-        counters["collect_seed"] += 1
-        env = skill.make_env(config.num_envs, counters["collect_seed"], **env_options(), **config.collector_options)
-        collector = skill_collector(
-            env if frame is None else TransformedEnv(env, UnaryTransform(["observation"], ["observation"], fn=frame)),
-            actor,
-            config.frames_per_batch,
-            remaining,
-        )
+    env: DirectionalLocomotionEnv | None = None  # the in-process collector's, where the curriculum widens in place
+    if counters["steps"] < config.total_steps:
         loop = SkillLoop(
             run, f"{skill.name} ppo", "ppo", config, config.frames_per_batch, counters["steps"], save, progress_bar=progress_bar
         )
-        for batch in collector:
-            metrics = {
-                "train_reward": batch["next", "reward"].mean().item(),
-                "fall_rate_per_step": batch["next", "terminated"].float().mean().item(),
-                "policy_scale": batch["scale"].mean().item(),  # exploration noise (actions span [-1, 1])
-            }
-            if config.anneal_lr:
-                for group in optimizer.param_groups:
-                    group["lr"] = config.lr * max(0.0, 1.0 - counters["steps"] / config.total_steps)
-            metrics.update(_update(batch, loss, advantage, optimizer, config))
-            # The statistics move after the update, so each batch is collected and learned with the same ones.
-            norm.update(batch["observation"])
-            counters["steps"] += batch.numel()
-            counters["iterations"] += 1
-            collector.update_policy_weights_()
-            if loop.after_batch(counters["steps"], batch.numel(), metrics, evaluate):
-                break
-        collector.shutdown()
+        # A signal lets the batch in flight finish; the run then saves and stops (a second one stops it at once).
+        with deferred_signals() as signals:
+            while counters["steps"] < config.total_steps and signals.received is None:
+                # A resumed run draws fresh episodes from a new seed (the simulations are not saved),
+                # as do the new workers of a widened curriculum.
+                counters["collect_seed"] += 1
+                collector, env = _collector(skill, config, counters, actor, frame, {**env_options(), **config.collector_options})
+                spread = counters["command_spread"]
+                try:
+                    for batch in collector:
+                        metrics = _learn(batch, loss, advantage, optimizer, norm, config, counters)
+                        collector.update_policy_weights_()  # the workers' copy (in process: the same module)
+                        if loop.after_batch(counters["steps"], batch.numel(), metrics, evaluate):
+                            break
+                        if signals.received is not None or (env is None and counters["command_spread"] != spread):
+                            break
+                finally:
+                    collector.shutdown()  # the workers too, whatever stopped the loop
         loop.close()
+        if signals.received is not None and counters["steps"] < config.total_steps:
+            raise RunInterrupted(signals.received)
     record = {"skill": skill.name, "algorithm": "ppo", "steps": counters["steps"], "best_eval_score": counters["best_score"]}
     if "init_from" in counters:
         record.update(init_from=counters["init_from"], init_steps=counters["init_steps"])
     return run.finish(output, record)
+
+
+def _turned(env: EnvBase, frame: nn.Module | None) -> EnvBase:
+    """``env`` with its observations turned by the run's command frame (itself without one)."""
+    return env if frame is None else TransformedEnv(env, UnaryTransform(["observation"], ["observation"], fn=frame))
+
+
+def _training_env(make_env: Any, count: int, options: dict[str, Any], frame: nn.Module | None, seed: int) -> EnvBase:
+    """One collector worker's env: ``count`` simulations seeded ``seed``, behind the command frame."""
+    return _turned(make_env(count, seed, **options), frame)
+
+
+def _collector(
+    skill: LocomotionSkill,
+    config: PPOLocomotionConfig,
+    counters: dict[str, Any],
+    actor: nn.Module,
+    frame: nn.Module | None,
+    options: dict[str, Any],
+) -> tuple[BaseCollector, DirectionalLocomotionEnv | None]:
+    """The collector of the rest of the run under ``counters["collect_seed"]``, and its env where it is
+    in this process (``collector_workers`` 1: one env of every simulation, seeded ``collect_seed``,
+    the runs on record); with more workers, each builds its share (seeds :func:`worker_seeds`)."""
+    remaining = config.total_steps - counters["steps"]
+    if config.collector_workers == 1:
+        env = skill.make_env(config.num_envs, counters["collect_seed"], **options)
+        return skill_collector(_turned(env, frame), actor, config.frames_per_batch, remaining), env
+    seeds = worker_seeds(config.seed, counters["collect_seed"], config.collector_workers)
+    log.info("[%s ppo] collecting in %d processes, seeds %s", skill.name, len(seeds), [pair.env for pair in seeds])
+    make_env = functools.partial(_training_env, skill.make_env, config.num_envs // len(seeds), options, frame)
+    return parallel_skill_collector(make_env, seeds, actor, config.frames_per_batch, remaining), None
+
+
+def _learn(
+    batch: TensorDictBase,
+    loss: ClipPPOLoss,
+    advantage: GAE,
+    optimizer: torch.optim.Optimizer,
+    norm: RunningNormalisation,
+    config: PPOLocomotionConfig,
+    counters: dict[str, Any],
+) -> dict[str, float]:
+    """One iteration's learning from its collected ``batch``: the PPO update, then the normaliser
+    and the counters; returns the batch's metrics."""
+    metrics = {
+        "train_reward": batch["next", "reward"].mean().item(),
+        "fall_rate_per_step": batch["next", "terminated"].float().mean().item(),
+        "policy_scale": batch["scale"].mean().item(),  # exploration noise (actions span [-1, 1])
+    }
+    if config.anneal_lr:
+        for group in optimizer.param_groups:
+            group["lr"] = config.lr * max(0.0, 1.0 - counters["steps"] / config.total_steps)
+    metrics.update(_update(batch, loss, advantage, optimizer, config))
+    # The statistics move after the update, so each batch is collected and learned with the same ones.
+    norm.update(batch["observation"])
+    counters["steps"] += batch.numel()
+    counters["iterations"] += 1
+    return metrics
 
 
 def _make_learner(
@@ -635,6 +705,12 @@ def main(argv: list[str] | None = None) -> None:
         default=None,
         help="steps between the training commands' redraws, drawn in [LOW, HIGH] (humanoid; default 100 200)",
     )
+    parser.add_argument(
+        "--collector-workers",
+        type=count,
+        default=None,
+        help="processes that collect each batch, each on an equal share of --num-envs (default 1: this one)",
+    )
     parser.add_argument("--init-from", default=None, help="a PPO resume_state.pt whose learner starts this new run (a curriculum stage)")
     parser.add_argument(
         "--export-from",
@@ -671,6 +747,7 @@ def main(argv: list[str] | None = None) -> None:
         "eval_envs": args.eval_envs,
         "command_frame": args.command_frame,
         "direction_period": None if args.direction_period is None else tuple(args.direction_period),
+        "collector_workers": args.collector_workers,
     }
     run_skill_command(
         args.threads,

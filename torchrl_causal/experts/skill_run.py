@@ -11,6 +11,9 @@ rest of a run is the same and lives here:
   non-empty folder in one line (:class:`~torchrl_causal.experiment.run_directory.ForeignFilesError`)
   before anything is written. A run directory belongs to one config (:func:`check_same_config`).
 * :func:`read_skill_state`: a resume state of the right learner and skill, or one line.
+* :func:`skill_collector` collects in the trainer's process; :func:`parallel_skill_collector`
+  in ``workers`` spawned processes (TorchRL's :class:`~torchrl.collectors.MultiSyncCollector`),
+  each on its own simulations with its own :func:`worker_seeds`, one thread each.
 * :class:`SkillLoop`: after each collected batch, evaluate (every ``eval_every`` env steps and at
   the end; the best :func:`upright_speed` keeps its body) or save (every ``checkpoint_minutes``),
   log the scalars and move the progress bar.
@@ -41,22 +44,26 @@ import argparse
 import json
 import logging
 import math
+import os
 import shutil
+import sys
 import time
-from collections.abc import Callable, Collection, Iterable, Iterator, Mapping, MutableMapping
+from collections.abc import Callable, Collection, Iterable, Iterator, Mapping, MutableMapping, Sequence
 from contextlib import contextmanager
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 from torch import nn
-from torchrl.collectors import Collector
+from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.envs import EnvBase
 from torchrl.record.loggers.csv import CSVLogger
 
 from torchrl_causal.command_line import OneLineParser, count, non_negative, one_line_errors
 from torchrl_causal.errors import InvalidValueError, TorchRLCausalError
+from torchrl_causal.experiment.interrupts import RunInterrupted, ignored_signals
 from torchrl_causal.experiment.run_directory import (
     EntryPath,
     atomic_save,
@@ -72,23 +79,28 @@ __all__ = [
     "BOOKKEEPING",
     "EXPORT",
     "RESUME_STATE",
+    "SeededEnvMaker",
     "SkillLoop",
     "SkillRunDirectory",
+    "WorkerSeeds",
     "add_output_argument",
     "check_same_config",
     "finish_skill_run",
+    "parallel_skill_collector",
     "read_skill_state",
     "require_positive",
     "run_skill_command",
     "skill_collector",
     "skill_parser",
     "upright_speed",
+    "worker_seeds",
 ]
 
 log = logging.getLogger(__name__)
 
-#: Fields a continued run may change — the budget, and when and how much it evaluates and saves.
-BOOKKEEPING = frozenset({"total_steps", "eval_every", "eval_envs", "eval_steps", "checkpoint_minutes"})
+#: Fields a continued run may change: the budget, when and how much it evaluates and saves, and
+#: how many processes collect (each attempt draws fresh episodes from fresh seeds anyway).
+BOOKKEEPING = frozenset({"total_steps", "eval_every", "eval_envs", "eval_steps", "checkpoint_minutes", "collector_workers"})
 
 #: Where a skill run keeps the body of its best evaluation, in its run directory.
 BEST_BODY = "best_body.pt"
@@ -271,6 +283,136 @@ def skill_collector(env: EnvBase, actor: nn.Module, frames_per_batch: int, steps
     )
 
 
+@dataclass(frozen=True)
+class WorkerSeeds:
+    """The seeds of one collector worker: its env's generator and its process's torch generator
+    (the policy's sampled actions). Two, so the env and the policy never draw the same stream."""
+
+    env: int
+    policy: int
+
+
+def worker_seeds(run_seed: int, collect_seed: int, workers: int) -> list[WorkerSeeds]:
+    """The seeds of ``workers`` collector processes in the attempt of a run (seeded ``run_seed``)
+    that collects under ``collect_seed`` (a run's counter, one more at each attempt).
+
+    Each is drawn by NumPy's :class:`~numpy.random.SeedSequence` from ``(run_seed, collect_seed)``
+    and the worker's index: 63-bit seeds that no other worker, attempt or run shares (two
+    different keys collide with probability ~1e-19), where consecutive small integers would
+    give a run seeded 1 the streams of a run seeded 0's next attempt.
+
+    Examples:
+        >>> seeds = worker_seeds(0, 1, 2)
+        >>> len({seed for pair in seeds for seed in (pair.env, pair.policy)})
+        4
+        >>> worker_seeds(0, 1, 2) == seeds  # a function of its arguments
+        True
+    """
+    if workers < 1:
+        raise InvalidValueError(f"workers must be >= 1, got {workers}")
+    children = np.random.SeedSequence([run_seed, collect_seed]).spawn(workers)
+    pairs = [child.generate_state(2, np.uint64) >> np.uint64(1) for child in children]  # < 2**63: any torch seed
+    return [WorkerSeeds(env=int(env), policy=int(policy)) for env, policy in pairs]
+
+
+@dataclass(frozen=True)
+class SeededEnvMaker:
+    """Builds one collector worker's env, in that worker: seeds the worker's torch generator
+    (its policy's sampled actions) with ``seeds.policy``, then returns ``make_env(seeds.env)``.
+
+    TorchRL pickles it (with cloudpickle) into the spawned worker, so ``make_env`` may be a closure.
+
+    Examples:
+        >>> maker = SeededEnvMaker(lambda seed: seed, WorkerSeeds(env=7, policy=3))
+        >>> with torch.random.fork_rng():  # as in a worker, which owns its generator
+        ...     maker(), torch.initial_seed()
+        (7, 3)
+    """
+
+    make_env: Callable[[int], Any]
+    seeds: WorkerSeeds
+
+    def __call__(self) -> Any:
+        torch.manual_seed(self.seeds.policy)
+        return self.make_env(self.seeds.env)
+
+
+#: Thread pools a spawned worker would size to the machine at start-up (OpenMP, MKL, OpenBLAS).
+_THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
+@contextmanager
+def _single_threaded_children() -> Iterator[None]:
+    """Processes started in the block inherit one-thread pools (their environment is copied at
+    start) and ignore the stop signals (their parent shuts them down); this process's
+    environment and handlers are restored after."""
+    saved = {name: os.environ.get(name) for name in _THREAD_VARIABLES}
+    os.environ.update(dict.fromkeys(_THREAD_VARIABLES, "1"))
+    try:
+        with ignored_signals():
+            yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
+#: Seconds ``shutdown()`` waits for the workers to exit before it kills them (TorchRL's default,
+#: 10, is short on a loaded machine; the workers ignore SIGTERM, so TorchRL's terminate step is moot).
+WORKER_SHUTDOWN_SECONDS = 60.0
+
+
+class _PatientMultiSyncCollector(MultiSyncCollector):
+    """A :class:`~torchrl.collectors.MultiSyncCollector` whose ``shutdown()`` waits
+    :data:`WORKER_SHUTDOWN_SECONDS` for its workers unless told otherwise, and leaves this
+    process the torch thread count it had when the collector was built (TorchRL's sets it to
+    its own guess: 1 after an ``OMP_NUM_THREADS=1`` start)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        self._owner_threads = torch.get_num_threads()
+        super().__init__(*args, **kwargs)
+
+    def shutdown(self, timeout: float | None = None, close_env: bool = True, raise_on_error: bool = True) -> None:
+        try:
+            super().shutdown(WORKER_SHUTDOWN_SECONDS if timeout is None else timeout, close_env, raise_on_error)
+        finally:
+            torch.set_num_threads(self._owner_threads)
+
+
+def parallel_skill_collector(
+    make_env: Callable[[int], EnvBase], seeds: Sequence[WorkerSeeds], actor: nn.Module, frames_per_batch: int, steps: int
+) -> MultiSyncCollector:
+    """:func:`skill_collector`'s batches from ``len(seeds)`` spawned processes, in lockstep.
+
+    Worker ``i`` builds ``make_env(seeds[i].env)`` (its share of the simulations) after seeding its
+    torch generator with ``seeds[i].policy``, and collects ``frames_per_batch / len(seeds)``
+    steps per batch; the shares are concatenated along the env dimension, so a batch has the
+    same ``[envs, time]`` shape as :func:`skill_collector`'s over all the simulations. The
+    workers run one thread each and ignore SIGINT/SIGTERM (this process stops them: call
+    ``shutdown()``); this process keeps its thread count. ``actor``'s parameters and buffers
+    reach the workers at construction and at each ``update_policy_weights_()``.
+    """
+    workers = len(seeds)
+    if workers < 2 or frames_per_batch % workers:
+        raise InvalidValueError(f"need >= 2 workers that divide frames_per_batch ({frames_per_batch}), got {workers}")
+    threads = torch.get_num_threads()  # TorchRL would give this process (cores - workers) threads
+    with _single_threaded_children():
+        return _PatientMultiSyncCollector(
+            [SeededEnvMaker(make_env, pair) for pair in seeds],
+            actor,
+            frames_per_batch=frames_per_batch,
+            total_frames=math.ceil(steps / frames_per_batch) * frames_per_batch,
+            device="cpu",
+            cat_results=0,  # [envs of worker 0; envs of worker 1; ...] x time
+            use_buffers=True,
+            num_threads=threads,
+            num_sub_threads=1,
+            auto_register_policy_transforms=False,
+        )
+
+
 class SkillLoop:
     """The bookkeeping after each collected batch of a skill run.
 
@@ -363,11 +505,17 @@ def skill_parser(doc: str, skills: Iterable[str], default_skill: str, *, run_dir
 @contextmanager
 def skill_command(threads: int) -> Iterator[None]:
     """The setting of a skill command's run: its log lines on standard error, ``threads`` torch
-    threads, and every refusal (a bad value, a foreign folder, a state of another run) in one line."""
+    threads, every refusal (a bad value, a foreign folder, a state of another run) in one line,
+    and a run stopped by a signal (:class:`~torchrl_causal.experiment.interrupts.RunInterrupted`,
+    after it saved its state) in one line with the signal's exit status."""
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     torch.set_num_threads(threads)
-    with one_line_errors(TorchRLCausalError):
-        yield
+    try:
+        with one_line_errors(TorchRLCausalError):
+            yield
+    except RunInterrupted as stop:
+        print(f"{stop}: the run saved its state; the same command resumes it", file=sys.stderr)
+        raise SystemExit(stop.exit_code) from None
 
 
 def run_skill_command(threads: int, run_dir: Path, output: str | None, train: Callable[[Path, str | Path], dict[str, Any]]) -> None:
