@@ -34,7 +34,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import torch
 from hydra.utils import get_class
@@ -187,4 +187,7 @@ def recorded_body(cfg: DictConfig) -> ExpertBody | None:
     record = OmegaConf.select(cfg, EXPERT_BODY_KEY)
     if record is None:
         return None
-    return ExpertBody.from_record(OmegaConf.to_container(record) if isinstance(record, DictConfig) else record)
+    fields = OmegaConf.to_container(record) if isinstance(record, DictConfig) else record
+    if not isinstance(fields, Mapping):
+        raise ExpertBodyError(f"{EXPERT_BODY_KEY} must be a mapping with weights and sha256, got {fields!r}")
+    return ExpertBody.from_record(cast("Mapping[str, Any]", fields))
