@@ -211,6 +211,8 @@ def _claim_and_run(
     run_dir.claim(
         cfg, ignored=(trainer_class.budget_key,) if trainer_class is not None and extendable else (), recorded={EXPERT_BODY_KEY: body}
     )
+    # The run's config as config.yaml holds it, the body it records included: what the loggers log.
+    OmegaConf.update(cfg, EXPERT_BODY_KEY, body, merge=False, force_add=True)
     status = run_dir.read_status()
     if status.get("status") == "complete" and status.get("total") == total:
         log.info("%s is complete: its stored evaluations are returned", run_dir.path)
