@@ -14,6 +14,7 @@ the training step in flight, checkpoints, marks the run interrupted and raises
 
 from __future__ import annotations
 
+import copy
 import functools
 import logging
 import os
@@ -211,7 +212,9 @@ def _claim_and_run(
     run_dir.claim(
         cfg, ignored=(trainer_class.budget_key,) if trainer_class is not None and extendable else (), recorded={EXPERT_BODY_KEY: body}
     )
-    # The run's config as config.yaml holds it, the body it records included: what the loggers log.
+    # The run's config as config.yaml holds it, the body it records included: what the loggers log
+    # (on a copy: the caller's config stays as it was composed, valid for its schema).
+    cfg = copy.deepcopy(cfg)
     OmegaConf.update(cfg, EXPERT_BODY_KEY, body, merge=False, force_add=True)
     status = run_dir.read_status()
     if status.get("status") == "complete" and status.get("total") == total:
